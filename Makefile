@@ -1,0 +1,30 @@
+# `make demo` and `make test` each build .venv when it is missing and install
+# the package into it non-editably: an editable install leaves out the data
+# files (ament index marker, lib/estimation_nodes) that `ros2 run` needs.
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+SOURCES := $(shell find estimation_nodes msgs_config scripts resource -type f -not -name '*.pyc') \
+	pyproject.toml package.xml setup.py setup.cfg
+
+.PHONY: demo test bench install clean
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade "pip>=23"
+
+$(STAMP): $(BIN)/python $(SOURCES)
+	$(BIN)/python -m pip install --quiet --upgrade ".[test]"
+	touch $@
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/estimation_demo $(DEMO_ARGS)
+
+test: $(STAMP)
+	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/python -m pytest $(PYTEST_ARGS)
+
+clean:
+	rm -rf $(VENV) build *.egg-info

@@ -1,0 +1,80 @@
+"""Invariants of the matrix Kalman filter."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from estimation_nodes.core import LinearGaussianModel, kalman
+
+
+def spd(rng, size):
+    root = rng.normal(size=(size, size))
+    return root @ root.T + 0.1 * np.eye(size)
+
+
+def random_model(rng, n, m, p, q):
+    return LinearGaussianModel(
+        A=rng.normal(scale=0.5, size=(n, n)) + np.eye(n), B=rng.normal(size=(n, m)),
+        C=rng.normal(size=(p, n)), F=rng.normal(size=(n, q)), Q=spd(rng, q), R=spd(rng, p))
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 5), p=st.integers(1, 3))
+def test_joseph_form_equals_short_form_at_optimal_gain(seed, n, p):
+    rng = np.random.default_rng(seed)
+    model = random_model(rng, n, 1, p, n)
+    x, P = rng.normal(size=n), spd(rng, n)
+    z = rng.normal(size=p)
+    _, P_joseph, K = kalman.correct(x, P, z, model)
+    P_short = P - K @ model.C @ P
+    np.testing.assert_allclose(P_joseph, P_short, atol=1e-8 * max(1.0, np.abs(P).max()))
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), n=st.integers(1, 4))
+def test_covariance_stays_symmetric_psd_over_long_runs(seed, n):
+    rng = np.random.default_rng(seed)
+    model = random_model(rng, n, 2, 2, n)
+    # A spectral radius at most 1 keeps a long run from overflowing.
+    A = model.A / max(1.0, np.max(np.abs(np.linalg.eigvals(model.A))))
+    model = LinearGaussianModel(A, model.B, model.C, model.F, model.Q, model.R)
+    x, P = np.zeros(n), np.eye(n)
+    for _ in range(500):
+        x, P = kalman.predict(x, P, rng.normal(size=2), model)
+        x, P, _ = kalman.correct(x, P, rng.normal(size=2), model)
+        np.testing.assert_array_equal(P, P.T)
+        assert np.min(np.linalg.eigvalsh(P)) >= -1e-12 * np.abs(P).max()
+    assert np.all(np.isfinite(x))
+
+
+def test_scalar_and_matrix_paths_agree_on_random_sequences():
+    rng = np.random.default_rng(7)
+    model = LinearGaussianModel.scalar(var_u=0.7, var_z=2.5)
+    xs, vs = 1.0, 50.0
+    xm, Pm = np.array([1.0]), np.array([[50.0]])
+    for _ in range(200):
+        u, z = rng.normal(), rng.normal(scale=5.0)
+        xs, vs = kalman.predict_scalar(xs, vs, u, 0.7)
+        xs, vs, _ = kalman.correct_scalar(xs, vs, z, 2.5)
+        xm, Pm = kalman.predict(xm, Pm, [u], model)
+        xm, Pm, _ = kalman.correct(xm, Pm, [z], model)
+        np.testing.assert_allclose([xm[0], Pm[0, 0]], [xs, vs], rtol=1e-12)
+
+
+def test_nan_measurement_is_rejected_and_inputs_untouched():
+    model = LinearGaussianModel.scalar(2.0, 4.0)
+    x, P = np.array([1.0]), np.array([[3.0]])
+    for bad in (np.nan, np.inf, -np.inf):
+        with pytest.raises(ValueError, match="z: expected finite"):
+            kalman.correct(x, P, [bad], model)
+        with pytest.raises(ValueError, match="z: expected a finite"):
+            kalman.correct_scalar(1.0, 3.0, bad, 4.0)
+    np.testing.assert_array_equal(x, [1.0])
+    np.testing.assert_array_equal(P, [[3.0]])
+
+
+def test_normalized_innovation_squared_scalar():
+    model = LinearGaussianModel.scalar(2.0, 4.0)
+    nis = kalman.normalized_innovation_squared(np.array([1.0]), np.array([[5.0]]), [4.0], model)
+    np.testing.assert_allclose(nis, 9.0 / 9.0)
