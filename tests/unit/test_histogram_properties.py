@@ -21,7 +21,7 @@ def loop_predict(belief, u, weights):
 
 
 def loop_correct(belief, likelihood):
-    products = [b * l for b, l in zip(belief, likelihood)]
+    products = [b * p for b, p in zip(belief, likelihood)]
     evidence = sum(products)
     return np.array([p / evidence for p in products]), evidence
 

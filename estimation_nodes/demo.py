@@ -1,0 +1,350 @@
+"""estimation_demo: start the three nodes, show the run as it happens, summarize it.
+
+The nodes run as separate processes (as a launch file would start them), or in
+this one process with ``--in-process``. A monitor node here prints each
+estimate as it arrives; when the motion commander has sent its last command
+the graph stays up ``--linger`` seconds for late subscribers, then every
+process this script started is ended by its own pid.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+NODE_MODULES = {
+    "estimator": "estimation_nodes.nodes.estimator",
+    "tile_sensor": "estimation_nodes.nodes.tile_sensor",
+    "motion_commander": "estimation_nodes.nodes.motion_commander",
+}
+#: Start order: the commander last, so it finds the others soonest.
+START_ORDER = ("estimator", "tile_sensor", "motion_commander")
+BARS = " ▁▂▃▄▅▆▇█"
+
+
+class DemoError(Exception):
+    """A problem with the user's input: printed as one line, exit code 2."""
+
+
+def scenario_dirs() -> list[Path]:
+    """Where installed and source-tree scenario files live, most specific first."""
+    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    prefixes.append(sys.prefix)
+    dirs = [Path(p) / "share" / "estimation_nodes" / "msgs_config" for p in prefixes]
+    dirs.append(Path(__file__).resolve().parent.parent / "msgs_config")
+    return [d for d in dirs if d.is_dir()]
+
+
+def find_scenario(name: str) -> Path:
+    for directory in scenario_dirs():
+        candidate = directory / f"{name}.yaml"
+        if candidate.is_file():
+            return candidate
+    known = sorted({p.stem for d in scenario_dirs() for p in d.glob("*.yaml")})
+    raise DemoError(f"--scenario: no scenario named {name!r}; known scenarios: {known}")
+
+
+def check_params_file(path: Path) -> Path:
+    """A readable YAML file whose top level maps node names to ros__parameters."""
+    if not path.is_file():
+        raise DemoError(f"--params-file: {path} is not a file")
+    try:
+        content = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as error:
+        raise DemoError(f"--params-file: cannot read {path}: {error}") from None
+    except yaml.YAMLError as error:
+        raise DemoError(f"--params-file: {path} is not valid YAML: {error}") from None
+    if not isinstance(content, dict) or not all(
+        isinstance(section, dict) and "ros__parameters" in section
+        for section in content.values()
+    ):
+        raise DemoError(
+            f"--params-file: {path} must map node names to 'ros__parameters:' sections")
+    return path.resolve()
+
+
+def ros_environment() -> dict[str, str]:
+    """This process's environment with DDS confined to localhost unless the user chose."""
+    env = dict(os.environ)
+    if "ROS_AUTOMATIC_DISCOVERY_RANGE" not in env and "ROS_LOCALHOST_ONLY" not in env:
+        env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "LOCALHOST"
+        print("estimation_demo: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (DDS stays on this "
+              "machine; set the variable yourself to change it)")
+    env.setdefault("ROS_DOMAIN_ID", "0")
+    print(f"estimation_demo: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']} "
+          f"(use the same to watch with ros2 topic echo)")
+    return env
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="estimation_demo", description=__doc__.split("\n")[0])
+    source = parser.add_mutually_exclusive_group()
+    source.add_argument("--scenario", default="default",
+                        help="scenario name from msgs_config (default: %(default)s)")
+    source.add_argument("--params-file", type=Path, help="a ROS parameter file of your own")
+    parser.add_argument("--settle", type=float, default=2.0,
+                        help="seconds for the graph to discover itself before the first "
+                             "command (default: %(default)s)")
+    parser.add_argument("--linger", type=float, default=2.0,
+                        help="seconds the graph stays up after the last command "
+                             "(default: %(default)s)")
+    parser.add_argument("--timeout", type=float, default=600.0,
+                        help="give up after this many seconds (default: %(default)s)")
+    parser.add_argument("--in-process", action="store_true",
+                        help="run the three nodes in this process instead of three")
+    parser.add_argument("--quiet", action="store_true", help="print only the summary")
+    args = parser.parse_args(argv)
+    if args.settle < 0 or args.linger < 0 or args.timeout <= 0:
+        parser.error("--settle and --linger must be >= 0, --timeout > 0")
+    return args
+
+
+def commander_overrides(settle: float, exit_when_done: bool) -> list[str]:
+    return ["-p", f"exit_when_done:={str(exit_when_done).lower()}",
+            "-p", f"start_delay:={settle}"]
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    args = parse_args(argv)
+    try:
+        params = (check_params_file(args.params_file) if args.params_file
+                  else check_params_file(find_scenario(args.scenario)))
+    except DemoError as error:
+        print(f"estimation_demo: {error}", file=sys.stderr)
+        sys.exit(2)
+    env = ros_environment()
+    os.environ.update(env)
+    print(f"estimation_demo: parameters from {params}")
+    runner = run_in_process if args.in_process else run_processes
+    sys.exit(runner(params, args))
+
+
+# --- watching the run ------------------------------------------------------------------------
+
+
+@dataclass
+class RunRecord:
+    """What the monitor saw, one entry per message, in arrival order per topic."""
+
+    predicted: list[np.ndarray] = field(default_factory=list)
+    corrected: list[np.ndarray] = field(default_factory=list)
+    kalman: list[tuple[float, float]] = field(default_factory=list)
+    truth: list[int] = field(default_factory=list)
+
+
+def bars(belief: np.ndarray) -> str:
+    """One block character per cell, height by probability relative to the largest."""
+    if belief.size > 60:
+        top = np.argsort(belief)[::-1][:3]
+        return "top cells " + ", ".join(f"{i}:{belief[i]:.3f}" for i in top)
+    scaled = belief / max(float(belief.max()), 1e-300) * (len(BARS) - 1)
+    blocks = "".join(BARS[int(round(v))] for v in scaled)
+    if belief.size <= 12:
+        return f"|{blocks}|  [" + " ".join(f"{v:.6f}" for v in belief) + "]"
+    return f"|{blocks}|"
+
+
+def make_monitor(record: RunRecord, quiet: bool, **node_kwargs):
+    """A node that records and prints every estimate (imports rclpy lazily)."""
+    from geometry_msgs.msg import PoseWithCovariance
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray, Int64
+
+    from estimation_nodes.nodes.ros_common import latched_qos
+
+    def say(text: str) -> None:
+        if not quiet:
+            print(text, flush=True)
+
+    def cells_of(belief: np.ndarray) -> int:
+        return belief.size
+
+    def truth_note(step: int, size: int) -> str:
+        if step < len(record.truth):
+            return f"(true cell {record.truth[step] % size})"
+        return ""
+
+    def on_predicted(msg) -> None:
+        belief = np.frombuffer(msg.data, dtype=np.float64).copy()
+        record.predicted.append(belief)
+        say(f"step {len(record.predicted):3d}  predicted  {bars(belief)}")
+
+    def on_corrected(msg) -> None:
+        belief = np.frombuffer(msg.data, dtype=np.float64).copy()
+        record.corrected.append(belief)
+        step = len(record.corrected) - 1
+        say(f"step {step + 1:3d}  corrected  {bars(belief)}  most likely cell "
+            f"{int(np.argmax(belief))} {truth_note(step, cells_of(belief))}")
+
+    def on_kalman(msg) -> None:
+        x, var = msg.pose.position.x, msg.covariance[0]
+        record.kalman.append((x, var))
+        step = len(record.kalman) - 1
+        truth = f"(true position {record.truth[step]})" if step < len(record.truth) else ""
+        say(f"step {step + 1:3d}  kalman     x = {x:.6f}  var = {var:.6f}  "
+            f"std = {np.sqrt(var):.6f}  {truth}")
+
+    def on_truth(msg) -> None:
+        record.truth.append(msg.data)
+
+    node = Node("estimation_demo_monitor", **node_kwargs)
+    qos = latched_qos(1000)
+    node.create_subscription(Int64, "true_position", on_truth, qos)
+    node.create_subscription(Float64MultiArray, "belief_predicted", on_predicted, qos)
+    node.create_subscription(Float64MultiArray, "belief", on_corrected, qos)
+    node.create_subscription(PoseWithCovariance, "kalman_estimate", on_kalman, qos)
+    return node
+
+
+def summarize(record: RunRecord) -> str:
+    lines = ["", "summary:",
+             f"  predictions {len(record.predicted)}, histogram corrections "
+             f"{len(record.corrected)}, Kalman corrections {len(record.kalman)}"]
+    if record.corrected:
+        final = record.corrected[-1]
+        lines.append(f"  final belief: most likely cell {int(np.argmax(final))} "
+                     f"(p = {final.max():.6f})")
+        steps = min(len(record.corrected), len(record.truth))
+        if steps:
+            hits = [int(np.argmax(record.corrected[i])) == record.truth[i] % final.size
+                    for i in range(steps)]
+            lines.append(f"  most likely cell == true cell in {sum(hits)} of {steps} steps")
+    if record.kalman:
+        x, var = record.kalman[-1]
+        lines.append(f"  final Kalman estimate {x:.6f} +- {np.sqrt(var):.6f} (1 std)")
+        steps = min(len(record.kalman), len(record.truth))
+        if steps:
+            errors = [record.kalman[i][0] - record.truth[i] for i in range(steps)]
+            lines.append(f"  Kalman RMS error {np.sqrt(np.mean(np.square(errors))):.6f} cells "
+                         f"over {steps} steps")
+    return "\n".join(lines)
+
+
+# --- running the graph -----------------------------------------------------------------------
+
+
+def spin_until(executor, done, deadline: float) -> bool:
+    """Spin until ``done()`` or the deadline; True when done."""
+    while time.monotonic() < deadline:
+        if done():
+            return True
+        executor.spin_once(timeout_sec=0.05)
+    return done()
+
+
+def stop_process(process: subprocess.Popen, grace: float = 5.0) -> int:
+    """End one child by its pid: SIGINT (a clean rclpy shutdown), then SIGKILL."""
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+        try:
+            process.wait(timeout=grace)
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+    return process.returncode
+
+
+def run_processes(params: Path, args: argparse.Namespace) -> int:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    processes: dict[str, subprocess.Popen] = {}
+    record = RunRecord()
+    rclpy.init()
+    executor = SingleThreadedExecutor()
+    monitor = None
+    code = 0
+    try:
+        monitor = make_monitor(record, args.quiet)
+        executor.add_node(monitor)
+        for name in START_ORDER:
+            command = [sys.executable, "-m", NODE_MODULES[name],
+                       "--ros-args", "--params-file", str(params)]
+            if name == "motion_commander":
+                command += commander_overrides(args.settle, exit_when_done=True)
+            processes[name] = subprocess.Popen(command)
+        commander = processes["motion_commander"]
+        deadline = time.monotonic() + args.timeout
+        finished = spin_until(executor, lambda: any(p.poll() is not None
+                                                    for p in processes.values()), deadline)
+        failed = {n: p.returncode for n, p in processes.items()
+                  if p.poll() is not None and p.returncode != 0}
+        if not finished:
+            print("estimation_demo: stopped early: --timeout reached", file=sys.stderr)
+            code = 1
+        elif failed or commander.poll() is None:
+            print(f"estimation_demo: stopped early: exit codes {failed}", file=sys.stderr)
+            code = 1
+        else:
+            spin_until(executor, lambda: False, time.monotonic() + args.linger)
+    except KeyboardInterrupt:
+        print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
+        code = 130
+    finally:
+        for name in reversed(START_ORDER):
+            if name in processes:
+                stop_process(processes[name])
+        if monitor is not None:
+            monitor.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown()
+    print(summarize(record))
+    return code
+
+
+def run_in_process(params: Path, args: argparse.Namespace) -> int:
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from estimation_nodes.nodes.estimator import Estimator
+    from estimation_nodes.nodes.motion_commander import MotionCommander
+    from estimation_nodes.nodes.tile_sensor import TileSensor
+    from estimation_nodes.nodes.ros_common import ConfigurationError
+
+    record = RunRecord()
+    ros_args = ["--ros-args", "--params-file", str(params),
+                *commander_overrides(args.settle, exit_when_done=False)]
+    rclpy.init(args=["estimation_demo", *ros_args])
+    executor = SingleThreadedExecutor()
+    nodes = []
+    code = 0
+    try:
+        nodes.append(make_monitor(record, args.quiet))
+        for node_class in (Estimator, TileSensor, MotionCommander):
+            nodes.append(node_class())
+        for node in nodes:
+            executor.add_node(node)
+        commander = nodes[-1]
+        limit = commander.command_limit
+        done = spin_until(executor, lambda: limit is not None and commander.sent >= limit,
+                          time.monotonic() + args.timeout)
+        if not done:
+            print("estimation_demo: stopped early: timeout", file=sys.stderr)
+            code = 1
+        spin_until(executor, lambda: False, time.monotonic() + args.linger)
+    except ConfigurationError as error:
+        print(f"estimation_demo: invalid parameter {error}", file=sys.stderr)
+        code = 2
+    except KeyboardInterrupt:
+        code = 130
+    finally:
+        for node in nodes:
+            node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown()
+    print(summarize(record))
+    return code
+
+
+if __name__ == "__main__":
+    main()

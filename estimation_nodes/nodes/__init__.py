@@ -1,0 +1,1 @@
+"""Thin rclpy nodes over the core: parameters, QoS and message conversion only."""

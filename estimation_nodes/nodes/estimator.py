@@ -1,0 +1,194 @@
+"""The estimator node: histogram and Kalman filters over the core, fed by topics.
+
+Events are handled one at a time in arrival order: ``motion_cmd`` predicts
+both filters, ``tile_observation`` corrects the histogram, and
+``position_measurement`` corrects the Kalman filter. A bad message is dropped
+with a throttled warning and counted; the filters are left untouched.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseWithCovariance, PoseWithCovarianceStamped
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rcl_interfaces.msg import SetParametersResult
+from std_msgs.msg import Float64, Float64MultiArray, Int32, String
+from std_srvs.srv import Trigger
+
+from estimation_nodes.core import histogram
+from estimation_nodes.nodes.ros_common import (
+    INPUT_QOS,
+    ConfigurationError,
+    declare_parameters,
+    latched_qos,
+    main_for,
+    overlay,
+    parameter_values,
+    rejection,
+    to_multiarray,
+    to_pose_with_covariance,
+)
+from estimation_nodes.settings import ESTIMATOR_SPECS, EstimatorSettings, build_estimator_settings
+from estimation_nodes.tracks import HistogramTrack, KalmanTrack
+
+#: Seconds between two warnings about the same kind of rejected message.
+WARN_THROTTLE_S = 5.0
+
+
+class Estimator(Node):
+    """Histogram belief and Kalman estimate of a robot on a cyclic world of tiles."""
+
+    node_name = "estimator"
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(self.node_name, **kwargs)
+        declare_parameters(self, ESTIMATOR_SPECS)
+        self._values = parameter_values(self, ESTIMATOR_SPECS)
+        try:
+            settings = build_estimator_settings(self._values)
+        except ValueError as error:
+            raise ConfigurationError(str(error)) from None
+        self._settings = settings
+        self._pending: EstimatorSettings | None = None
+        self._histogram = HistogramTrack(settings)
+        self._kalman = KalmanTrack(settings.kalman)
+        self.handled: Counter[str] = Counter()
+        self.rejected: Counter[str] = Counter()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        depth = self._values["history_depth"]
+        self._belief_predicted_pub = self.create_publisher(
+            Float64MultiArray, "belief_predicted", latched_qos(depth))
+        self._belief_pub = self.create_publisher(Float64MultiArray, "belief", latched_qos(depth))
+        self._kalman_pub = self.create_publisher(
+            PoseWithCovariance, "kalman_estimate", latched_qos(depth))
+        self._kalman_stamped_pub = self.create_publisher(
+            PoseWithCovarianceStamped, "kalman_estimate_stamped", latched_qos(depth))
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        # motion_cmd first: when a command and the reading it caused are ready
+        # together, the executor takes them in subscription order.
+        self.create_subscription(Int32, "motion_cmd", self._on_motion_cmd, INPUT_QOS)
+        self.create_subscription(String, "tile_observation", self._on_tile_observation,
+                                 INPUT_QOS)
+        self.create_subscription(Float64, "position_measurement",
+                                 self._on_position_measurement, INPUT_QOS)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_timer(self._values["diagnostics_period"], self._publish_diagnostics)
+        self._last_warning: dict[str, float] = {}
+        self.get_logger().info(
+            f"ready: {settings.histogram.size} cells, Kalman mode {settings.kalman.mode}")
+
+    # --- parameters -------------------------------------------------------------------------
+
+    def _on_set_parameters(self, changes: list[Parameter]) -> SetParametersResult:
+        """Validate the whole proposed configuration; apply it at the next event."""
+        proposed = overlay(self._values, changes)
+        try:
+            settings = build_estimator_settings(proposed)
+        except ValueError as error:
+            return rejection(str(error))
+        self._values = proposed
+        self._pending = settings
+        return SetParametersResult(successful=True)
+
+    def _apply_pending_settings(self) -> None:
+        if self._pending is None:
+            return
+        settings, self._pending = self._pending, None
+        self._settings = settings
+        if self._histogram.reconfigure(settings):
+            self.get_logger().info("new world size or prior: histogram belief reset")
+        self._kalman.reconfigure(settings.kalman)
+
+    # --- events -----------------------------------------------------------------------------
+
+    def _on_motion_cmd(self, msg: Int32) -> None:
+        self._apply_pending_settings()
+        self._histogram.predict(msg.data)
+        self._kalman.predict(float(msg.data))
+        self.handled["motion_cmd"] += 1
+        self._belief_predicted_pub.publish(to_multiarray(self._histogram.belief, "cells"))
+
+    def _on_tile_observation(self, msg: String) -> None:
+        self._apply_pending_settings()
+        try:
+            self._histogram.correct(msg.data)
+        except histogram.ZeroEvidenceError as error:
+            self._reject("zero_evidence", f"tile_observation {msg.data!r} dropped: {error}")
+            return
+        except ValueError as error:
+            self._reject("unknown_class", f"tile_observation dropped: {error}")
+            return
+        self.handled["tile_observation"] += 1
+        self._belief_pub.publish(to_multiarray(self._histogram.belief, "cells"))
+
+    def _on_position_measurement(self, msg: Float64) -> None:
+        self._apply_pending_settings()
+        try:
+            estimate = self._kalman.correct(msg.data)
+        except ValueError as error:
+            self._reject("non_finite_measurement", f"position_measurement dropped: {error}")
+            return
+        self.handled["position_measurement"] += 1
+        pose = to_pose_with_covariance(estimate.x, estimate.var)
+        self._kalman_pub.publish(pose)
+        stamped = PoseWithCovarianceStamped()
+        stamped.header.stamp = self.get_clock().now().to_msg()
+        stamped.header.frame_id = self._values["frame_id"]
+        stamped.pose = pose
+        self._kalman_stamped_pub.publish(stamped)
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self._apply_pending_settings()
+        self._histogram.reset()
+        self._kalman.reset()
+        self.handled["reset"] += 1
+        response.success = True
+        response.message = "histogram belief and Kalman estimate back to their initial state"
+        self.get_logger().info(response.message)
+        return response
+
+    def _reject(self, reason: str, message: str) -> None:
+        self.rejected[reason] += 1
+        now = time.monotonic()
+        if now - self._last_warning.get(reason, -math.inf) >= WARN_THROTTLE_S:
+            self._last_warning[reason] = now
+            self.get_logger().warning(f"{message} (rejected so far: {self.rejected[reason]})")
+
+    # --- health -----------------------------------------------------------------------------
+
+    def _publish_diagnostics(self) -> None:
+        belief = self._histogram.belief
+        values = {
+            "cells": belief.size,
+            "most_likely_cell": histogram.most_likely_cell(belief),
+            "belief_entropy_bits": f"{histogram.entropy(belief):.6g}",
+            "last_evidence": f"{self._histogram.last_evidence:.6g}",
+            "kalman_x": f"{self._kalman.estimate.x:.9g}",
+            "kalman_var": f"{self._kalman.estimate.var:.9g}",
+            "kalman_nis": f"{self._kalman.last_nis:.6g}",
+        }
+        values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
+        values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if self.rejected else DiagnosticStatus.OK,
+            name=f"{self.get_name()}: filters",
+            message=f"{sum(self.rejected.values())} messages rejected" if self.rejected else "ok",
+            hardware_id=self.get_fully_qualified_name(),
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diagnostics_pub.publish(array)
+
+
+main = main_for(Estimator)
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,120 @@
+"""Publishes a sequence of motion commands at a fixed rate.
+
+No command is lost at start-up: the first one goes out only once
+``required_subscribers`` subscriptions are matched on ``motion_cmd`` (the
+tile sensor and the estimator by default) and ``start_delay`` has passed
+after that, so the rest of the graph has time to discover itself.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+from rclpy.node import Node
+from std_msgs.msg import Int32
+
+from estimation_nodes.nodes.ros_common import (
+    INPUT_QOS,
+    ConfigurationError,
+    declare_parameters,
+    main_for,
+    parameter_values,
+)
+from estimation_nodes.settings import ParamSpec
+
+COMMANDER_SPECS = (
+    ParamSpec("commands", [1], "Motion commands to publish, in cells (positive: index + u).",
+              read_only=True),
+    ParamSpec("rate_hz", 2.0, "Commands per second.", read_only=True,
+              min_value=0.001, max_value=100000.0),
+    ParamSpec("repeat", False, "Start the sequence again after its last command.",
+              read_only=True),
+    ParamSpec("max_commands", 0, "Stop after this many commands in all (0: no limit).",
+              read_only=True, min_value=0, max_value=2**31 - 1),
+    ParamSpec("required_subscribers", 2, "Matched subscriptions on motion_cmd to wait for "
+              "before the first command.", read_only=True, min_value=0, max_value=1000),
+    ParamSpec("start_delay", 1.0, "Seconds to wait after the subscribers are there, so the "
+              "rest of the graph can discover itself.", read_only=True,
+              min_value=0.0, max_value=3600.0),
+    ParamSpec("exit_when_done", False, "End the process after the last command instead of "
+              "staying up.", read_only=True),
+)
+
+#: How often the commander checks for subscribers while it waits.
+POLL_PERIOD_S = 0.05
+
+
+class MotionCommander(Node):
+    """Drives the robot with a configured command sequence."""
+
+    node_name = "motion_commander"
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(self.node_name, **kwargs)
+        declare_parameters(self, COMMANDER_SPECS)
+        values = parameter_values(self, COMMANDER_SPECS)
+        self._commands = list(values["commands"])
+        if not self._commands:
+            raise ConfigurationError("commands: expected at least one command, got []")
+        self._values = values
+        self._limit = self._command_limit()
+        self._sent = 0
+        self._ready_since: float | None = None
+        self._publisher = self.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+        self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
+        self.get_logger().info(
+            f"waiting for {values['required_subscribers']} subscribers on "
+            f"{self._publisher.topic_name}")
+
+    @property
+    def command_limit(self) -> int | None:
+        """How many commands this run sends in all; None when it repeats without end."""
+        return self._limit
+
+    @property
+    def sent(self) -> int:
+        """Commands published so far."""
+        return self._sent
+
+    def _command_limit(self) -> int | None:
+        """How many commands to send in all; None for endless."""
+        limit = self._values["max_commands"] or None
+        if self._values["repeat"]:
+            return limit
+        return min(limit or len(self._commands), len(self._commands))
+
+    def _wait_for_graph(self) -> None:
+        if self._publisher.get_subscription_count() < self._values["required_subscribers"]:
+            self._ready_since = None
+            return
+        now = time.monotonic()
+        if self._ready_since is None:
+            self._ready_since = now
+        if now - self._ready_since < self._values["start_delay"]:
+            return
+        self._timer.cancel()
+        self.destroy_timer(self._timer)
+        self.get_logger().info(f"subscribers matched: sending at {self._values['rate_hz']} Hz")
+        self._timer = self.create_timer(1.0 / self._values["rate_hz"], self._send_next)
+        self._send_next()
+
+    def _send_next(self) -> None:
+        if self._limit is not None and self._sent >= self._limit:
+            self._finish()
+            return
+        command = int(self._commands[self._sent % len(self._commands)])
+        self._publisher.publish(Int32(data=command))
+        self._sent += 1
+
+    def _finish(self) -> None:
+        self._timer.cancel()
+        self.get_logger().info(f"done: {self._sent} commands sent")
+        if self._values["exit_when_done"]:
+            raise SystemExit(0)
+
+
+main = main_for(MotionCommander)
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,188 @@
+"""The nodes' parameters: one table of specs, and builders from values to core models.
+
+Nothing here imports rclpy, so the same validation runs at start-up, on every
+runtime parameter change, in offline tools and in plain unit tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from estimation_nodes.core import GaussianState, HistogramModel, LinearGaussianModel
+from estimation_nodes.core.config import (
+    BOOK_CLASSES,
+    BOOK_KERNEL,
+    BOOK_SENSOR_MODEL,
+    BOOK_WORLD,
+    FloatArray,
+    ScalarKalmanModel,
+    as_finite_array,
+    check_belief,
+    check_finite,
+    check_positive,
+)
+
+#: Marks a parameter with no default: declared by type, unset means "not given".
+UNSET = None
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: name, default (or the type name when it has none), description."""
+
+    name: str
+    default: Any
+    description: str
+    read_only: bool = False
+    #: For parameters without a default: one of "string_array", "double_array".
+    type_name: str = ""
+    #: Inclusive bounds shown by `ros2 param describe` (numbers only).
+    min_value: float | None = None
+    max_value: float | None = None
+
+
+WORLD_SPECS = (
+    ParamSpec("world", list(BOOK_WORLD),
+              "Class name of each cell of the cyclic world, in order (index 0 first)."),
+    ParamSpec("classes", list(BOOK_CLASSES), "Names of the tile classes the sensor reports."),
+    ParamSpec("sensor_model", [p for row in BOOK_SENSOR_MODEL for p in row],
+              "p(observed class | true class), row-major: one row per true class in the "
+              "order of 'classes', one column per observed class; rows sum to 1."),
+    ParamSpec("motion_kernel", list(BOOK_KERNEL),
+              "Probabilities of landing at offsets -k..k around the commanded target "
+              "(odd length, centred, sums to 1)."),
+)
+
+ESTIMATOR_SPECS = WORLD_SPECS + (
+    ParamSpec("initial_belief", UNSET,
+              "Prior over the cells (normalized); leave unset for a uniform prior.",
+              type_name="double_array"),
+    ParamSpec("kalman.mode", "scalar",
+              "'scalar': the book's Algorithm 4 with kalman.x0/P0/var_u/var_z; 'matrix': "
+              "the matrix filter with kalman.matrix.*.", read_only=True),
+    ParamSpec("kalman.x0", 0.0, "Initial position estimate (cells) of the scalar filter."),
+    ParamSpec("kalman.P0", 100.0, "Initial variance of the scalar filter (> 0).",),
+    ParamSpec("kalman.var_u", 2.0, "Variance of an executed move (> 0)."),
+    ParamSpec("kalman.var_z", 4.0, "Variance of a position measurement (> 0)."),
+    ParamSpec("kalman.matrix.x0", [0.0], "Matrix mode: initial state; its length n sets the "
+              "state size. Component 0 is published as the position."),
+    ParamSpec("kalman.matrix.P0", [100.0], "Matrix mode: initial covariance, n x n row-major."),
+    ParamSpec("kalman.matrix.A", [1.0], "Matrix mode: transition matrix A, n x n row-major."),
+    ParamSpec("kalman.matrix.B", [1.0], "Matrix mode: input matrix B, n x 1 (u is the "
+              "motion command)."),
+    ParamSpec("kalman.matrix.C", [1.0], "Matrix mode: measurement matrix C, 1 x n."),
+    ParamSpec("kalman.matrix.F", [1.0], "Matrix mode: noise-input matrix F, n x q row-major."),
+    ParamSpec("kalman.matrix.Q", [2.0], "Matrix mode: process noise covariance, q x q."),
+    ParamSpec("kalman.matrix.R", [4.0], "Matrix mode: measurement noise variance, 1 x 1."),
+    ParamSpec("frame_id", "map", "frame_id of kalman_estimate_stamped."),
+    ParamSpec("history_depth", 100,
+              "How many past estimates each output topic keeps for late subscribers "
+              "(transient_local). Lower it for very large worlds.", read_only=True,
+              min_value=1, max_value=100000),
+    ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics messages.",
+              read_only=True, min_value=0.01, max_value=3600.0),
+)
+
+
+def spec_defaults(specs: tuple[ParamSpec, ...]) -> dict[str, Any]:
+    """Every parameter's default, by name (UNSET for those without one)."""
+    return {spec.name: spec.default for spec in specs}
+
+
+def build_histogram_model(values: Mapping[str, Any]) -> HistogramModel:
+    """The world, sensor model and motion kernel from parameter values."""
+    return HistogramModel.from_lists(
+        world=list(values["world"]),
+        classes=list(values["classes"]),
+        sensor_model=list(values["sensor_model"]),
+        kernel=list(values["motion_kernel"]),
+    )
+
+
+def build_initial_belief(values: Mapping[str, Any], size: int) -> FloatArray:
+    """The prior: the given initial_belief, or uniform when it is unset."""
+    given = values.get("initial_belief")
+    if given is UNSET or len(given) == 0:
+        return np.full(size, 1.0 / size)
+    return check_belief("initial_belief", list(given), size)
+
+
+def _matrix(name: str, flat: Any, rows: int) -> FloatArray:
+    """Reshape a row-major flat list into ``rows`` rows, naming the parameter on error."""
+    values = as_finite_array(name, list(flat), ndim=1)
+    if rows < 1 or values.size == 0 or values.size % rows != 0:
+        raise ValueError(
+            f"{name}: expected a row-major matrix with {rows} rows, got {values.size} values"
+        )
+    return values.reshape(rows, -1)
+
+
+@dataclass(frozen=True)
+class KalmanSettings:
+    """Which Kalman filter the estimator runs and from where it starts."""
+
+    mode: str
+    initial: GaussianState
+    scalar: ScalarKalmanModel | None
+    matrix: LinearGaussianModel | None
+
+
+def build_kalman_settings(values: Mapping[str, Any]) -> KalmanSettings:
+    """Kalman model and initial state from parameter values."""
+    mode = values["kalman.mode"]
+    if mode == "scalar":
+        x0 = check_finite("kalman.x0", values["kalman.x0"])
+        P0 = check_positive("kalman.P0", values["kalman.P0"])
+        scalar = ScalarKalmanModel(values["kalman.var_u"], values["kalman.var_z"])
+        initial = GaussianState(np.array([x0]), np.array([[P0]]))
+        return KalmanSettings(mode, initial, scalar, None)
+    if mode == "matrix":
+        prefix = "kalman.matrix."
+        x0 = as_finite_array(prefix + "x0", list(values[prefix + "x0"]), ndim=1)
+        n = x0.size
+        try:
+            initial = GaussianState(x0, _matrix(prefix + "P0", values[prefix + "P0"], n))
+            model = LinearGaussianModel(
+                A=_matrix(prefix + "A", values[prefix + "A"], n),
+                B=_matrix(prefix + "B", values[prefix + "B"], n),
+                C=_matrix(prefix + "C", values[prefix + "C"], 1),
+                F=_matrix(prefix + "F", values[prefix + "F"], n),
+                Q=_square(prefix + "Q", values[prefix + "Q"]),
+                R=_square(prefix + "R", values[prefix + "R"]),
+            )
+        except ValueError as error:
+            message = str(error)
+            raise ValueError(
+                message if message.startswith(prefix) else prefix + message
+            ) from None
+        if model.input_size != 1:
+            raise ValueError(f"{prefix}B: expected n x 1 (u is one command), got {model.B.shape}")
+        return KalmanSettings(mode, initial, None, model)
+    raise ValueError(f"kalman.mode: expected 'scalar' or 'matrix', got {mode!r}")
+
+
+def _square(name: str, flat: Any) -> FloatArray:
+    size = int(round(np.sqrt(len(flat))))
+    if size * size != len(flat):
+        raise ValueError(f"{name}: expected a square matrix (k*k values), got {len(flat)} values")
+    return _matrix(name, flat, size)
+
+
+@dataclass(frozen=True)
+class EstimatorSettings:
+    """Everything the estimator's filters need, validated as one."""
+
+    histogram: HistogramModel
+    initial_belief: FloatArray
+    kalman: KalmanSettings
+
+
+def build_estimator_settings(values: Mapping[str, Any]) -> EstimatorSettings:
+    """Validate all estimator parameters together; ``ValueError`` names the first bad one."""
+    histogram = build_histogram_model(values)
+    initial_belief = build_initial_belief(values, histogram.size)
+    return EstimatorSettings(histogram, initial_belief, build_kalman_settings(values))
