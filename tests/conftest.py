@@ -1,0 +1,132 @@
+"""Shared fixtures: an isolated ROS domain per test, a fresh rclpy Context, a collector node.
+
+Every ROS participant a test makes, in this process or a child, uses
+ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST and a ROS_DOMAIN_ID that
+domain_coordinator reserves for that test alone.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+SCENARIOS = REPO / "msgs_config"
+
+
+@pytest.fixture
+def domain_id():
+    from domain_coordinator import domain_id as reserve
+
+    with reserve() as reserved:
+        yield reserved
+
+
+@pytest.fixture
+def ros_env(domain_id, monkeypatch):
+    """Environment for child processes, and the same settings for this process."""
+    monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
+    monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
+    env = dict(os.environ)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+@pytest.fixture
+def context(ros_env, domain_id):
+    import rclpy
+
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx, domain_id=domain_id)
+    try:
+        yield ctx
+    finally:
+        rclpy.try_shutdown(context=ctx)
+
+
+@pytest.fixture
+def executor(context):
+    from rclpy.executors import SingleThreadedExecutor
+
+    ex = SingleThreadedExecutor(context=context)
+    try:
+        yield ex
+    finally:
+        ex.shutdown()
+
+
+def spin_until(executor, predicate, timeout: float) -> bool:
+    """Spin until ``predicate()`` holds or ``timeout`` seconds pass; the predicate's last value."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        executor.spin_once(timeout_sec=0.02)
+    return bool(predicate())
+
+
+class Collector:
+    """A test node that records every message on the topics it is given.
+
+    ``topics`` maps a topic to its type, or to (type, QoS); the default QoS is
+    the estimator's latched output profile.
+    """
+
+    def __init__(self, context, topics: dict, name: str = "test_collector"):
+        from rclpy.node import Node
+
+        from estimation_nodes.nodes.ros_common import latched_qos
+
+        self.node = Node(name, context=context)
+        self.messages: dict[str, list] = defaultdict(list)
+        for topic, spec in topics.items():
+            msg_type, qos = spec if isinstance(spec, tuple) else (spec, latched_qos(1000))
+            self.node.create_subscription(
+                msg_type, topic, lambda msg, t=topic: self.messages[t].append(msg), qos)
+
+    def count(self, topic: str) -> int:
+        return len(self.messages[topic])
+
+
+@pytest.fixture
+def collector_factory(context, executor):
+    made = []
+
+    def make(topics, name="test_collector"):
+        collector = Collector(context, topics, name)
+        executor.add_node(collector.node)
+        made.append(collector)
+        return collector
+
+    yield make
+    for collector in made:
+        collector.node.destroy_node()
+
+
+@pytest.fixture
+def processes(ros_env):
+    """Start children with the test's ROS environment; each is ended by its pid afterwards."""
+    started: list[subprocess.Popen] = []
+
+    def start(command, **kwargs):
+        process = subprocess.Popen(command, env=ros_env, stdout=subprocess.PIPE,
+                                   stderr=subprocess.STDOUT, text=True, **kwargs)
+        started.append(process)
+        return process
+
+    yield start
+    for process in started:
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()

@@ -1,0 +1,208 @@
+"""The real executables as subprocesses, found the way `ros2 run` finds them, observed here."""
+
+import os
+import signal
+import stat
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from geometry_msgs.msg import PoseWithCovariance
+from std_msgs.msg import Float64, Float64MultiArray, Int64, String
+
+from estimation_nodes.core import HistogramModel, histogram
+from estimation_nodes.nodes.ros_common import INPUT_QOS
+from tests.conftest import SCENARIOS, spin_until
+
+EXECUTABLES = ("motion_commander", "tile_sensor", "estimator", "estimation_demo")
+
+
+def executable(name: str) -> str:
+    """What `ros2 run estimation_nodes <name>` runs: <prefix>/lib/estimation_nodes/<name>."""
+    from ament_index_python.packages import get_package_prefix
+
+    return str(Path(get_package_prefix("estimation_nodes")) / "lib" / "estimation_nodes" / name)
+
+
+def test_ros2_run_finds_every_executable():
+    from ament_index_python.packages import get_package_prefix, get_package_share_directory
+
+    prefix = Path(get_package_prefix("estimation_nodes"))
+    for name in EXECUTABLES:
+        path = prefix / "lib" / "estimation_nodes" / name
+        assert path.is_file(), f"{path} missing"
+        assert path.stat().st_mode & stat.S_IXUSR, f"{path} not executable"
+    share = Path(get_package_share_directory("estimation_nodes"))
+    from catkin_pkg.package import parse_package
+
+    assert parse_package(str(share / "package.xml")).name == "estimation_nodes"
+    assert {p.name for p in (share / "msgs_config").glob("*.yaml")} >= {
+        "default.yaml", "example_6_14.yaml", "example_6_18.yaml"}
+
+
+def test_source_package_xml_parses():
+    from catkin_pkg.package import parse_package
+
+    package = parse_package(str(Path(__file__).resolve().parents[2] / "package.xml"))
+    assert package.get_build_type() == "ament_python"
+
+
+def start_graph(processes, scenario: Path, *extra_commander_args: str):
+    started = {}
+    for name in ("estimator", "tile_sensor", "motion_commander"):
+        command = [executable(name), "--ros-args", "--params-file", str(scenario)]
+        if name == "motion_commander":
+            command += ["-p", "start_delay:=0.5", "-p", "exit_when_done:=true",
+                        *extra_commander_args]
+        started[name] = processes(command)
+    return started
+
+
+def wait_for_commander(executor, started, timeout=60.0):
+    commander = started["motion_commander"]
+    assert spin_until(executor, lambda: commander.poll() is not None, timeout), \
+        "the commander did not finish"
+    assert commander.returncode == 0, commander.stdout.read()
+
+
+def beliefs(messages):
+    return [np.frombuffer(m.data, dtype=np.float64) for m in messages]
+
+
+def test_example_6_14_end_to_end(processes, executor, collector_factory):
+    seen = collector_factory({"belief_predicted": Float64MultiArray, "belief": Float64MultiArray})
+    started = start_graph(processes, SCENARIOS / "example_6_14.yaml")
+    wait_for_commander(executor, started)
+    assert spin_until(executor, lambda: seen.count("belief") >= 3, 20.0)
+    spin_until(executor, lambda: False, 0.5)
+    predicted = [[0.2] * 5, [0.2375, 0.25, 0.2375, 0.1375, 0.1375],
+                 [0.1, 0.130714, 0.168571, 0.363571, 0.237143]]
+    corrected = [[0.25, 0.25, 0.125, 0.125, 0.25],
+                 [0.135714, 0.142857, 0.407143, 0.235714, 0.078571],
+                 [0.048443, 0.063322, 0.244983, 0.528374, 0.114879]]
+    np.testing.assert_allclose(beliefs(seen.messages["belief_predicted"]), predicted, atol=1e-6)
+    np.testing.assert_allclose(beliefs(seen.messages["belief"]), corrected, atol=1e-6)
+
+
+def test_example_6_18_end_to_end(processes, executor, collector_factory):
+    seen = collector_factory({"kalman_estimate": PoseWithCovariance})
+    started = start_graph(processes, SCENARIOS / "example_6_18.yaml")
+    wait_for_commander(executor, started)
+    assert spin_until(executor, lambda: seen.count("kalman_estimate") >= 5, 20.0)
+    spin_until(executor, lambda: False, 0.5)
+    got = [(m.pose.position.x, m.covariance[0]) for m in seen.messages["kalman_estimate"]]
+    np.testing.assert_allclose(got, list(zip(
+        [2.113208, 5.045977, 7.021958, 8.010857, 9.005414],
+        [3.849057, 2.375479, 2.089661, 2.022167, 2.005526])), atol=1e-6)
+
+
+def test_seeded_random_run_localizes_and_matches_offline_filter(
+        processes, executor, collector_factory):
+    scenario = SCENARIOS / "localization.yaml"
+    seen = collector_factory({"belief": Float64MultiArray, "true_position": Int64,
+                              "tile_observation": (String, INPUT_QOS)})
+    started = start_graph(processes, scenario, "-p", "rate_hz:=20.0")
+    wait_for_commander(executor, started)
+    steps = yaml.safe_load(scenario.read_text())["/motion_commander"]["ros__parameters"][
+        "max_commands"]
+    assert spin_until(executor, lambda: seen.count("belief") >= steps
+                      and seen.count("true_position") >= steps, 20.0)
+    truth = [m.data for m in seen.messages["true_position"]]
+    online = beliefs(seen.messages["belief"])
+    hits = [int(np.argmax(b)) == t % b.size for b, t in zip(online, truth)]
+    converged = hits[10:]
+    print(f"most likely cell == true cell in {sum(converged)} of {len(converged)} steps "
+          f"after step 10 ({sum(hits)} of {len(hits)} in all)")
+    assert sum(converged) / len(converged) >= 0.7
+    # The graph computed exactly what the core computes over the same observations.
+    params = yaml.safe_load(scenario.read_text())["/estimator"]["ros__parameters"]
+    model = HistogramModel.from_lists(params["world"], params["classes"],
+                                      params["sensor_model"], params["motion_kernel"])
+    belief = histogram.uniform(model.size)
+    for step, msg in enumerate(seen.messages["tile_observation"]):
+        belief = histogram.predict(belief, 1, model.kernel)
+        belief, _ = histogram.correct(belief, model.likelihood(msg.data))
+        np.testing.assert_allclose(online[step], belief, atol=1e-12)
+
+
+def test_bad_parameter_at_start_up_exits_2_with_one_clear_line(ros_env):
+    result = subprocess.run(
+        [executable("estimator"), "--ros-args", "-p", "motion_kernel:=[0.5, 0.5]"],
+        env=ros_env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
+    assert len(lines) == 1, lines
+    assert "motion_kernel" in lines[0] and "odd number" in lines[0] and "[0.5 0.5]" in lines[0]
+
+
+def test_demo_runs_a_scenario_and_exits_0(ros_env):
+    result = subprocess.run(
+        [executable("estimation_demo"), "--scenario", "example_6_14", "--settle", "0.5",
+         "--linger", "0.5"], env=ros_env, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "0.048443 0.063322 0.244983 0.528374 0.114879" in result.stdout
+    assert "final belief: most likely cell 3" in result.stdout
+
+
+def test_demo_in_process_reproduces_example_6_18(ros_env):
+    result = subprocess.run(
+        [executable("estimation_demo"), "--scenario", "example_6_18", "--in-process",
+         "--settle", "0.2", "--linger", "0.2"], env=ros_env, capture_output=True, text=True,
+        timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "final Kalman estimate 9.005414 +- 1.416166" in result.stdout
+
+
+@pytest.mark.parametrize("bad, message", [
+    ("missing.yaml", "is not a file"),
+    ("broken.yaml", "is not valid YAML"),
+])
+def test_demo_rejects_bad_params_file(ros_env, tmp_path, bad, message):
+    (tmp_path / "broken.yaml").write_text("/estimator: {ros__parameters: [unclosed\n")
+    result = subprocess.run([executable("estimation_demo"), "--params-file",
+                             str(tmp_path / bad)], env=ros_env, capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 2
+    assert message in result.stderr and "Traceback" not in result.stderr
+
+
+def children_of(pid: int) -> list[int]:
+    path = Path(f"/proc/{pid}/task/{pid}/children")
+    return [int(p) for p in path.read_text().split()] if path.exists() else []
+
+
+def test_demo_ctrl_c_leaves_no_process_behind(ros_env, domain_id):
+    demo = subprocess.Popen(
+        [sys.executable, "-m", "estimation_nodes.demo", "--scenario", "default", "--settle",
+         "0.5"], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while len(children_of(demo.pid)) < 3 and time.monotonic() < deadline:
+            time.sleep(0.1)
+        children = children_of(demo.pid)
+        assert len(children) == 3
+        demo.send_signal(signal.SIGINT)
+        output, _ = demo.communicate(timeout=30)
+        assert demo.returncode == 130, output
+        assert "summary:" in output
+        for child in children:
+            assert not Path(f"/proc/{child}").exists() or \
+                Path(f"/proc/{child}/stat").read_text().split()[2] == "Z"
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+            demo.wait()
+
+
+def test_ros_processes_confined_to_localhost_by_demo(ros_env):
+    env = {k: v for k, v in ros_env.items() if k != "ROS_AUTOMATIC_DISCOVERY_RANGE"}
+    result = subprocess.run(
+        [executable("estimation_demo"), "--scenario", "example_6_14", "--in-process",
+         "--settle", "0.1", "--linger", "0.1", "--quiet"], env=env, capture_output=True,
+        text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST" in result.stdout

@@ -1,0 +1,86 @@
+"""The motion commander and the tile sensor in-process."""
+
+import numpy as np
+import pytest
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64, Int32, Int64, String
+
+from estimation_nodes.core import HistogramModel, histogram
+from estimation_nodes.nodes.motion_commander import MotionCommander
+from estimation_nodes.nodes.ros_common import INPUT_QOS, ConfigurationError
+from estimation_nodes.nodes.tile_sensor import TileSensor
+from tests.conftest import spin_until
+
+
+def params(**values):
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def test_commander_waits_for_subscribers_then_sends_the_sequence(context, executor):
+    commander = MotionCommander(context=context, parameter_overrides=params(
+        commands=[2, -1], repeat=True, max_commands=5, rate_hz=50.0, required_subscribers=1,
+        start_delay=0.0))
+    executor.add_node(commander)
+    try:
+        # Nobody listens: nothing may be sent, however long it spins.
+        spin_until(executor, lambda: False, 0.5)
+        assert commander.sent == 0
+        received = []
+        commander.create_subscription(Int32, "motion_cmd", lambda m: received.append(m.data),
+                                      INPUT_QOS)
+        assert spin_until(executor, lambda: len(received) == 5, 10.0)
+        spin_until(executor, lambda: False, 0.2)
+        assert received == [2, -1, 2, -1, 2]
+    finally:
+        commander.destroy_node()
+
+
+def test_commander_without_commands_is_a_configuration_error(context):
+    with pytest.raises(ConfigurationError, match="commands"):
+        MotionCommander(context=context, parameter_overrides=[
+            Parameter("commands", Parameter.Type.INTEGER_ARRAY, [])])
+
+
+def sensor_outputs(context, executor, collector_factory, overrides, commands):
+    sensor = TileSensor(context=context, parameter_overrides=params(**overrides))
+    executor.add_node(sensor)
+    out = collector_factory({"tile_observation": (String, INPUT_QOS),
+                             "position_measurement": (Float64, INPUT_QOS),
+                             "true_position": Int64})
+    pub = out.node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+    assert spin_until(executor, lambda: pub.get_subscription_count() == 1, 10.0)
+    for u in commands:
+        pub.publish(Int32(data=u))
+    assert spin_until(executor, lambda: out.count("true_position") == len(commands), 10.0)
+    spin_until(executor, lambda: False, 0.2)
+    sensor.destroy_node()
+    return out.messages
+
+
+def test_scripted_sensor_replays_its_script(context, executor, collector_factory):
+    got = sensor_outputs(context, executor, collector_factory, dict(
+        scripted_observations=["bright", "dark", "dark"], initial_cell=0), [1, 1, 1, 1])
+    assert [m.data for m in got["tile_observation"]] == ["bright", "dark", "dark"]
+    assert [m.data for m in got["true_position"]] == [1, 2, 3, 4]
+    assert got["position_measurement"] == []
+
+
+def test_seeded_sensor_is_reproducible_and_follows_the_models(context, executor,
+                                                              collector_factory):
+    got = sensor_outputs(context, executor, collector_factory,
+                         dict(seed=11, measurement_variance=0.25), [1] * 20)
+    # The same draws, made here with the core's samplers, give the same run.
+    model, rng, position = HistogramModel.book(), np.random.default_rng(11), 0
+    for step in range(20):
+        position += 1 + histogram.sample_offset(model.kernel, rng)
+        observed = histogram.sample_observation(model.sensor.probabilities,
+                                                model.cell_class_index(position), rng)
+        z = position + 0.5 * rng.standard_normal()
+        assert got["true_position"][step].data == position
+        assert got["tile_observation"][step].data == model.sensor.classes[observed]
+        assert got["position_measurement"][step].data == pytest.approx(z, abs=1e-12)
+
+
+def test_sensor_rejects_unknown_scripted_class(context):
+    with pytest.raises(ConfigurationError, match="unknown tile class 'grey'"):
+        TileSensor(context=context, parameter_overrides=params(scripted_observations=["grey"]))

@@ -1,0 +1,221 @@
+"""The estimator in-process, driven by a test node, with a fresh Context per test."""
+
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseWithCovariance, PoseWithCovarianceStamped
+from rclpy.parameter import Parameter
+from std_msgs.msg import Float64, Float64MultiArray, Int32, String
+from std_srvs.srv import Trigger
+
+from estimation_nodes.core import HistogramModel, histogram
+from estimation_nodes.nodes.estimator import Estimator
+from estimation_nodes.nodes.ros_common import INPUT_QOS, ConfigurationError
+from tests.conftest import spin_until
+
+OUTPUTS = {
+    "belief_predicted": Float64MultiArray,
+    "belief": Float64MultiArray,
+    "kalman_estimate": PoseWithCovariance,
+    "kalman_estimate_stamped": PoseWithCovarianceStamped,
+}
+
+
+class Driver:
+    """Publishes inputs to the estimator and waits for its outputs."""
+
+    def __init__(self, context, executor, collector_factory, **overrides):
+        self.executor = executor
+        self.estimator = Estimator(
+            context=context,
+            parameter_overrides=[Parameter(k, value=v) for k, v in overrides.items()])
+        executor.add_node(self.estimator)
+        self.out = collector_factory(OUTPUTS)
+        node = self.out.node
+        self.cmd = node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+        self.tile = node.create_publisher(String, "tile_observation", INPUT_QOS)
+        self.z = node.create_publisher(Float64, "position_measurement", INPUT_QOS)
+        assert spin_until(executor, lambda: all(
+            p.get_subscription_count() >= 1 for p in (self.cmd, self.tile, self.z)), 10.0)
+
+    def send(self, publisher, msg, topic=None, handled=None):
+        """Publish and wait until the estimator has handled or rejected it."""
+        before = sum(self.estimator.handled.values()) + sum(self.estimator.rejected.values())
+        publisher.publish(msg)
+        assert spin_until(self.executor, lambda: sum(self.estimator.handled.values())
+                          + sum(self.estimator.rejected.values()) > before, 10.0)
+        if topic is not None:
+            assert spin_until(self.executor, lambda: self.out.count(topic) >= handled, 5.0)
+
+    def belief(self, topic="belief", index=-1):
+        return np.frombuffer(self.out.messages[topic][index].data, dtype=np.float64)
+
+    def destroy(self):
+        self.estimator.destroy_node()
+
+
+@pytest.fixture
+def driver(context, executor, collector_factory):
+    made = []
+
+    def make(**overrides):
+        d = Driver(context, executor, collector_factory, **overrides)
+        made.append(d)
+        return d
+
+    yield make
+    for d in made:
+        d.destroy()
+
+
+def test_example_6_14_through_the_node(driver):
+    d = driver()
+    book = HistogramModel.book()
+    expected = histogram.uniform(5)
+    for step, observed in enumerate(["bright", "dark", "dark"], start=1):
+        d.send(d.cmd, Int32(data=1), "belief_predicted", step)
+        d.send(d.tile, String(data=observed), "belief", step)
+        predicted = histogram.predict(expected, 1, book.kernel)
+        expected, _ = histogram.correct(predicted, book.likelihood(observed))
+        np.testing.assert_allclose(d.belief("belief_predicted"), predicted, atol=1e-12)
+        np.testing.assert_allclose(d.belief(), expected, atol=1e-12)
+    np.testing.assert_allclose(d.belief(), [0.048443, 0.063322, 0.244983, 0.528374, 0.114879],
+                               atol=1e-6)
+    dim = d.out.messages["belief"][-1].layout.dim[0]
+    assert (dim.label, dim.size, dim.stride) == ("cells", 5, 5)
+
+
+def test_example_6_18_through_the_node(driver):
+    d = driver(**{"kalman.x0": 3.0, "kalman.P0": 100.0, "frame_id": "odom"})
+    for step, (u, z) in enumerate(zip([2, 3, 2, 1, 1], [2.0, 5.0, 7.0, 8.0, 9.0]), start=1):
+        d.send(d.cmd, Int32(data=u))
+        d.send(d.z, Float64(data=z), "kalman_estimate_stamped", step)
+    xs = [m.pose.position.x for m in d.out.messages["kalman_estimate"]]
+    variances = [m.covariance[0] for m in d.out.messages["kalman_estimate"]]
+    np.testing.assert_allclose(xs, [2.113208, 5.045977, 7.021958, 8.010857, 9.005414], atol=1e-6)
+    np.testing.assert_allclose(variances, [3.849057, 2.375479, 2.089661, 2.022167, 2.005526],
+                               atol=1e-6)
+    stamped = d.out.messages["kalman_estimate_stamped"][-1]
+    assert stamped.header.frame_id == "odom"
+    assert stamped.pose.pose.position.x == xs[-1]
+
+
+def test_bad_messages_are_dropped_counted_and_leave_state_alone(driver):
+    d = driver()
+    d.send(d.cmd, Int32(data=1), "belief_predicted", 1)
+    d.send(d.tile, String(data="dark"), "belief", 1)
+    belief_before = d.belief().copy()
+    kalman_before = d.estimator._kalman.estimate
+    d.send(d.tile, String(data="purple"))
+    d.send(d.tile, String(data=""))
+    for bad in (math.nan, math.inf, -math.inf):
+        d.send(d.z, Float64(data=bad))
+    assert d.estimator.rejected == {"unknown_class": 2, "non_finite_measurement": 3}
+    assert d.out.count("belief") == 1 and d.out.count("kalman_estimate") == 0
+    np.testing.assert_array_equal(d.estimator._histogram.belief, belief_before)
+    assert d.estimator._kalman.estimate == kalman_before
+    # Later good messages are processed as if the bad ones never came.
+    d.send(d.tile, String(data="bright"), "belief", 2)
+    expected, _ = histogram.correct(belief_before, HistogramModel.book().likelihood("bright"))
+    np.testing.assert_allclose(d.belief(), expected, atol=1e-15)
+
+
+def test_zero_evidence_observation_is_rejected_without_nan(driver):
+    # A sensor that never mistakes dark for bright, and a prior certain of a bright cell.
+    d = driver(sensor_model=[1.0, 0.0, 0.0, 1.0], initial_belief=[1.0, 0.0, 0.0, 0.0, 0.0],
+               motion_kernel=[1.0])
+    d.send(d.tile, String(data="dark"))
+    assert d.estimator.rejected["zero_evidence"] == 1
+    assert d.out.count("belief") == 0
+    np.testing.assert_array_equal(d.estimator._histogram.belief, [1.0, 0, 0, 0, 0])
+
+
+def test_huge_command_wraps_exactly(driver):
+    d = driver(motion_kernel=[0.0, 1.0, 0.0], initial_belief=[1.0, 0.0, 0.0, 0.0, 0.0])
+    d.send(d.cmd, Int32(data=2**31 - 1), "belief_predicted", 1)
+    np.testing.assert_array_equal(d.belief("belief_predicted"),
+                                  histogram.one_hot(5, (2**31 - 1) % 5))
+
+
+def test_reset_service_restores_initial_state(driver, executor):
+    d = driver()
+    d.send(d.cmd, Int32(data=1), "belief_predicted", 1)
+    d.send(d.tile, String(data="dark"), "belief", 1)
+    d.send(d.z, Float64(data=4.0), "kalman_estimate", 1)
+    client = d.out.node.create_client(Trigger, "/estimator/reset")
+    assert client.wait_for_service(timeout_sec=10.0)
+    future = client.call_async(Trigger.Request())
+    assert spin_until(executor, future.done, 10.0)
+    assert future.result().success
+    np.testing.assert_array_equal(d.estimator._histogram.belief, histogram.uniform(5))
+    assert d.estimator._kalman.estimate == (0.0, 100.0)
+
+
+@pytest.mark.parametrize("name, value, reason", [
+    ("motion_kernel", [0.5, 0.5], "odd number"),
+    ("motion_kernel", [0.2, -0.1, 0.9], r"[0, 1]"),
+    ("motion_kernel", [0.1, 0.8, 0.2], "summing to 1"),
+    ("sensor_model", [0.8, 0.3, 0.4, 0.6], "summing to 1"),
+    ("world", ["bright", "purple"], "purple"),
+    ("world", [""], "lacks"),
+    ("initial_belief", [0.5, 0.5], "expected 5 values"),
+    ("initial_belief", [0.0] * 5, "positive sum"),
+    ("kalman.var_u", 0.0, "var_u"),
+    ("kalman.var_z", math.nan, "var_z"),
+    ("kalman.P0", -1.0, "P0"),
+])
+def test_runtime_parameter_change_rejected_and_filter_untouched(driver, name, value, reason):
+    d = driver()
+    d.send(d.cmd, Int32(data=1), "belief_predicted", 1)
+    d.send(d.tile, String(data="dark"), "belief", 1)
+    before = d.estimator._histogram.belief.copy()
+    [result] = d.estimator.set_parameters([Parameter(name, value=value)])
+    assert not result.successful
+    assert name.split(".")[-1] in result.reason and reason in result.reason
+    d.send(d.cmd, Int32(data=0), "belief_predicted", 2)
+    book = HistogramModel.book()
+    np.testing.assert_allclose(d.belief("belief_predicted"),
+                               histogram.predict(before, 0, book.kernel), atol=1e-15)
+
+
+def test_valid_runtime_change_applies_at_next_event(driver):
+    d = driver()
+    [result] = d.estimator.set_parameters([Parameter("motion_kernel", value=[0.0, 1.0, 0.0])])
+    assert result.successful
+    [result] = d.estimator.set_parameters(
+        [Parameter("world", value=["dark", "bright", "bright"])])
+    assert result.successful
+    d.send(d.cmd, Int32(data=1), "belief_predicted", 1)
+    np.testing.assert_allclose(d.belief("belief_predicted"), [1 / 3] * 3)
+    d.send(d.tile, String(data="dark"), "belief", 1)
+    np.testing.assert_allclose(d.belief(), [0.6, 0.2, 0.2])
+
+
+def test_read_only_parameter_cannot_change(driver):
+    d = driver()
+    [result] = d.estimator.set_parameters([Parameter("kalman.mode", value="matrix")])
+    assert not result.successful
+
+
+def test_invalid_start_up_parameter_is_a_configuration_error(context):
+    with pytest.raises(ConfigurationError, match="motion_kernel: expected an odd number"):
+        Estimator(context=context,
+                  parameter_overrides=[Parameter("motion_kernel", value=[0.5, 0.5])])
+
+
+def test_matrix_mode_constant_velocity(driver):
+    # State (position, velocity); the command nudges the velocity's estimate not at all:
+    # B = [1, 0]' adds u to the position as the scalar filter does.
+    d = driver(**{
+        "kalman.mode": "matrix",
+        "kalman.matrix.x0": [3.0, 0.0], "kalman.matrix.P0": [100.0, 0.0, 0.0, 1.0],
+        "kalman.matrix.A": [1.0, 0.0, 0.0, 1.0], "kalman.matrix.B": [1.0, 0.0],
+        "kalman.matrix.C": [1.0, 0.0], "kalman.matrix.F": [1.0, 0.0, 0.0, 1.0],
+        "kalman.matrix.Q": [2.0, 0.0, 0.0, 0.0], "kalman.matrix.R": [4.0],
+    })
+    for step, (u, z) in enumerate(zip([2, 3, 2, 1, 1], [2.0, 5.0, 7.0, 8.0, 9.0]), start=1):
+        d.send(d.cmd, Int32(data=u))
+        d.send(d.z, Float64(data=z), "kalman_estimate", step)
+    xs = [m.pose.position.x for m in d.out.messages["kalman_estimate"]]
+    np.testing.assert_allclose(xs, [2.113208, 5.045977, 7.021958, 8.010857, 9.005414], atol=1e-6)
