@@ -1,6 +1,5 @@
 """The real executables as subprocesses, found the way `ros2 run` finds them, observed here."""
 
-import os
 import signal
 import stat
 import subprocess
@@ -12,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 from geometry_msgs.msg import PoseWithCovariance
-from std_msgs.msg import Float64, Float64MultiArray, Int64, String
+from std_msgs.msg import Float64MultiArray, Int64, String
 
 from estimation_nodes.core import HistogramModel, histogram
 from estimation_nodes.nodes.ros_common import INPUT_QOS
