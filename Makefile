@@ -8,7 +8,12 @@ STAMP := $(VENV)/.installed
 SOURCES := $(shell find estimation_nodes msgs_config scripts resource -type f -not -name '*.pyc') \
 	pyproject.toml package.xml setup.py setup.cfg
 
-.PHONY: demo test bench install clean
+# DDS stays on loopback, in a domain of its own, unless the caller chose otherwise.
+ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+ROS_DOMAIN_ID ?= 42
+export ROS_AUTOMATIC_DISCOVERY_RANGE ROS_DOMAIN_ID
+
+.PHONY: demo test install clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
