@@ -20,7 +20,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
+
+from estimation_nodes.params_files import check_params_file
 
 NODE_MODULES = {
     "estimator": "estimation_nodes.nodes.estimator",
@@ -54,23 +55,11 @@ def find_scenario(name: str) -> Path:
     raise DemoError(f"--scenario: no scenario named {name!r}; known scenarios: {known}")
 
 
-def check_params_file(path: Path) -> Path:
-    """A readable YAML file whose top level maps node names to ros__parameters."""
-    if not path.is_file():
-        raise DemoError(f"--params-file: {path} is not a file")
+def checked_params_file(path: Path) -> Path:
     try:
-        content = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as error:
-        raise DemoError(f"--params-file: cannot read {path}: {error}") from None
-    except yaml.YAMLError as error:
-        raise DemoError(f"--params-file: {path} is not valid YAML: {error}") from None
-    if not isinstance(content, dict) or not all(
-        isinstance(section, dict) and "ros__parameters" in section
-        for section in content.values()
-    ):
-        raise DemoError(
-            f"--params-file: {path} must map node names to 'ros__parameters:' sections")
-    return path.resolve()
+        return check_params_file(path)
+    except ValueError as error:
+        raise DemoError(f"--params-file: {error}") from None
 
 
 def ros_environment() -> dict[str, str]:
@@ -117,8 +106,7 @@ def commander_overrides(settle: float, exit_when_done: bool) -> list[str]:
 def main(argv: Sequence[str] | None = None) -> None:
     args = parse_args(argv)
     try:
-        params = (check_params_file(args.params_file) if args.params_file
-                  else check_params_file(find_scenario(args.scenario)))
+        params = checked_params_file(args.params_file or find_scenario(args.scenario))
     except DemoError as error:
         print(f"estimation_demo: {error}", file=sys.stderr)
         sys.exit(2)

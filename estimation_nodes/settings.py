@@ -93,27 +93,34 @@ def spec_defaults(specs: tuple[ParamSpec, ...]) -> dict[str, Any]:
     return {spec.name: spec.default for spec in specs}
 
 
+def as_list(name: str, value: Any) -> list:
+    """A parameter that must be a list; an empty or unset one arrives as None or bytes."""
+    if value is UNSET or isinstance(value, (str, bytes)) or not hasattr(value, "__len__"):
+        raise ValueError(f"{name}: expected a non-empty list, got {value!r}")
+    return list(value)
+
+
 def build_histogram_model(values: Mapping[str, Any]) -> HistogramModel:
     """The world, sensor model and motion kernel from parameter values."""
     return HistogramModel.from_lists(
-        world=list(values["world"]),
-        classes=list(values["classes"]),
-        sensor_model=list(values["sensor_model"]),
-        kernel=list(values["motion_kernel"]),
+        world=as_list("world", values["world"]),
+        classes=as_list("classes", values["classes"]),
+        sensor_model=as_list("sensor_model", values["sensor_model"]),
+        kernel=as_list("motion_kernel", values["motion_kernel"]),
     )
 
 
 def build_initial_belief(values: Mapping[str, Any], size: int) -> FloatArray:
     """The prior: the given initial_belief, or uniform when it is unset."""
     given = values.get("initial_belief")
-    if given is UNSET or len(given) == 0:
+    if given is UNSET or (hasattr(given, "__len__") and len(given) == 0):
         return np.full(size, 1.0 / size)
-    return check_belief("initial_belief", list(given), size)
+    return check_belief("initial_belief", as_list("initial_belief", given), size)
 
 
 def _matrix(name: str, flat: Any, rows: int) -> FloatArray:
     """Reshape a row-major flat list into ``rows`` rows, naming the parameter on error."""
-    values = as_finite_array(name, list(flat), ndim=1)
+    values = as_finite_array(name, as_list(name, flat), ndim=1)
     if rows < 1 or values.size == 0 or values.size % rows != 0:
         raise ValueError(
             f"{name}: expected a row-major matrix with {rows} rows, got {values.size} values"
@@ -132,40 +139,50 @@ class KalmanSettings:
 
 
 def build_kalman_settings(values: Mapping[str, Any]) -> KalmanSettings:
-    """Kalman model and initial state from parameter values."""
+    """Kalman model and initial state from parameter values.
+
+    Both the scalar and the matrix parameters are validated whatever the mode,
+    so a bad value is refused when it is set, not when the mode changes.
+    """
     mode = values["kalman.mode"]
+    x0 = check_finite("kalman.x0", values["kalman.x0"])
+    P0 = check_positive("kalman.P0", values["kalman.P0"])
+    scalar = ScalarKalmanModel(values["kalman.var_u"], values["kalman.var_z"])
+    matrix_initial, matrix = _build_matrix_model(values, "kalman.matrix.")
     if mode == "scalar":
-        x0 = check_finite("kalman.x0", values["kalman.x0"])
-        P0 = check_positive("kalman.P0", values["kalman.P0"])
-        scalar = ScalarKalmanModel(values["kalman.var_u"], values["kalman.var_z"])
         initial = GaussianState(np.array([x0]), np.array([[P0]]))
         return KalmanSettings(mode, initial, scalar, None)
     if mode == "matrix":
-        prefix = "kalman.matrix."
-        x0 = as_finite_array(prefix + "x0", list(values[prefix + "x0"]), ndim=1)
-        n = x0.size
-        try:
-            initial = GaussianState(x0, _matrix(prefix + "P0", values[prefix + "P0"], n))
-            model = LinearGaussianModel(
-                A=_matrix(prefix + "A", values[prefix + "A"], n),
-                B=_matrix(prefix + "B", values[prefix + "B"], n),
-                C=_matrix(prefix + "C", values[prefix + "C"], 1),
-                F=_matrix(prefix + "F", values[prefix + "F"], n),
-                Q=_square(prefix + "Q", values[prefix + "Q"]),
-                R=_square(prefix + "R", values[prefix + "R"]),
-            )
-        except ValueError as error:
-            message = str(error)
-            raise ValueError(
-                message if message.startswith(prefix) else prefix + message
-            ) from None
-        if model.input_size != 1:
-            raise ValueError(f"{prefix}B: expected n x 1 (u is one command), got {model.B.shape}")
-        return KalmanSettings(mode, initial, None, model)
+        return KalmanSettings(mode, matrix_initial, None, matrix)
     raise ValueError(f"kalman.mode: expected 'scalar' or 'matrix', got {mode!r}")
 
 
+def _build_matrix_model(
+    values: Mapping[str, Any], prefix: str
+) -> tuple[GaussianState, LinearGaussianModel]:
+    """The matrix filter's initial state and model; errors name the full parameter."""
+    try:
+        x0 = as_finite_array("x0", as_list(prefix + "x0", values[prefix + "x0"]), ndim=1)
+        n = x0.size
+        initial = GaussianState(x0, _matrix("P0", values[prefix + "P0"], n))
+        model = LinearGaussianModel(
+            A=_matrix("A", values[prefix + "A"], n),
+            B=_matrix("B", values[prefix + "B"], n),
+            C=_matrix("C", values[prefix + "C"], 1),
+            F=_matrix("F", values[prefix + "F"], n),
+            Q=_square("Q", values[prefix + "Q"]),
+            R=_square("R", values[prefix + "R"]),
+        )
+    except ValueError as error:
+        message = str(error)
+        raise ValueError(message if message.startswith(prefix) else prefix + message) from None
+    if model.input_size != 1:
+        raise ValueError(f"{prefix}B: expected n x 1 (u is one command), got {model.B.shape}")
+    return initial, model
+
+
 def _square(name: str, flat: Any) -> FloatArray:
+    flat = as_list(name, flat)
     size = int(round(np.sqrt(len(flat))))
     if size * size != len(flat):
         raise ValueError(f"{name}: expected a square matrix (k*k values), got {len(flat)} values")

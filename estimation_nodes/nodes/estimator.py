@@ -15,6 +15,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovariance, PoseWithCovarianceStamped
+from rclpy.event_handler import QoSMessageLostInfo, SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rcl_interfaces.msg import SetParametersResult
@@ -60,6 +61,7 @@ class Estimator(Node):
         self._kalman = KalmanTrack(settings.kalman)
         self.handled: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
+        self._last_warning: dict[str, float] = {}
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         depth = self._values["history_depth"]
@@ -73,14 +75,15 @@ class Estimator(Node):
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         # motion_cmd first: when a command and the reading it caused are ready
         # together, the executor takes them in subscription order.
-        self.create_subscription(Int32, "motion_cmd", self._on_motion_cmd, INPUT_QOS)
-        self.create_subscription(String, "tile_observation", self._on_tile_observation,
-                                 INPUT_QOS)
-        self.create_subscription(Float64, "position_measurement",
-                                 self._on_position_measurement, INPUT_QOS)
+        for msg_type, topic, callback in (
+            (Int32, "motion_cmd", self._on_motion_cmd),
+            (String, "tile_observation", self._on_tile_observation),
+            (Float64, "position_measurement", self._on_position_measurement),
+        ):
+            self.create_subscription(msg_type, topic, callback, INPUT_QOS,
+                                     event_callbacks=self._lost_counter(topic))
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(self._values["diagnostics_period"], self._publish_diagnostics)
-        self._last_warning: dict[str, float] = {}
         self.get_logger().info(
             f"ready: {settings.histogram.size} cells, Kalman mode {settings.kalman.mode}")
 
@@ -154,8 +157,17 @@ class Estimator(Node):
         self.get_logger().info(response.message)
         return response
 
-    def _reject(self, reason: str, message: str) -> None:
-        self.rejected[reason] += 1
+    def _lost_counter(self, topic: str) -> SubscriptionEventCallbacks:
+        """Count messages DDS reports lost before they reached this node (queue overrun)."""
+
+        def on_lost(info: QoSMessageLostInfo) -> None:
+            self._reject(f"lost.{topic}", f"{info.total_count_change} {topic} messages lost",
+                         count=info.total_count_change)
+
+        return SubscriptionEventCallbacks(message_lost=on_lost)
+
+    def _reject(self, reason: str, message: str, count: int = 1) -> None:
+        self.rejected[reason] += count
         now = time.monotonic()
         if now - self._last_warning.get(reason, -math.inf) >= WARN_THROTTLE_S:
             self._last_warning[reason] = now

@@ -3,7 +3,11 @@
 No command is lost at start-up: the first one goes out only once
 ``required_subscribers`` subscriptions are matched on ``motion_cmd`` (the
 tile sensor and the estimator by default) and ``start_delay`` has passed
-after that, so the rest of the graph has time to discover itself.
+after that, so the rest of the graph has time to discover itself. Later,
+while fewer subscribers are matched (a node restarting), the commander
+pauses and resumes when they are back. A node that crashes is noticed only
+when DDS drops it (its lease, 20 s by default), so commands sent before then
+are lost to it.
 """
 
 from __future__ import annotations
@@ -61,6 +65,7 @@ class MotionCommander(Node):
         self._limit = self._command_limit()
         self._sent = 0
         self._ready_since: float | None = None
+        self._paused = False
         self._publisher = self.create_publisher(Int32, "motion_cmd", INPUT_QOS)
         self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
         self.get_logger().info(
@@ -103,6 +108,14 @@ class MotionCommander(Node):
         if self._limit is not None and self._sent >= self._limit:
             self._finish()
             return
+        if self._publisher.get_subscription_count() < self._values["required_subscribers"]:
+            if not self._paused:
+                self._paused = True
+                self.get_logger().warning("a subscriber left motion_cmd: paused until it is back")
+            return
+        if self._paused:
+            self._paused = False
+            self.get_logger().info("subscribers back: resuming")
         command = int(self._commands[self._sent % len(self._commands)])
         self._publisher.publish(Int32(data=command))
         self._sent += 1

@@ -17,12 +17,14 @@ from rcl_interfaces.msg import (
     SetParametersResult,
 )
 from rclpy.exceptions import ParameterException, ParameterUninitializedException
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from estimation_nodes.params_files import check_params_file, params_files_in
 from estimation_nodes.settings import UNSET, ParamSpec
 
 #: Commands and readings: reliable, nothing dropped at the queue under bursts.
@@ -135,7 +137,16 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> i
     Returns the process exit code: 0 on a normal end, 2 when a parameter is
     invalid (one log line names it), 1 on an unexpected error.
     """
-    rclpy.init(args=args)
+    name = getattr(node_class, "node_name", node_class.__name__)
+    argv = list(sys.argv if args is None else args)
+    try:
+        for path in params_files_in(argv):
+            check_params_file(path)
+        rclpy.init(args=argv)
+    except (ValueError, RCLError) as error:
+        print(f"[FATAL] [{name}]: cannot start: {str(error).split(', at ')[0]}",
+              file=sys.stderr)
+        return 2
     node = None
     code = 0
     try:
@@ -144,7 +155,6 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> i
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ConfigurationError as error:
-        name = getattr(node_class, "node_name", node_class.__name__)
         rclpy.logging.get_logger(name).fatal(f"invalid parameter {error}")
         code = 2
     except SystemExit as done:
