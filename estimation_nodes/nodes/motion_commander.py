@@ -5,7 +5,7 @@ No command is lost at start-up: the first one goes out only once
 tile sensor and the estimator by default) and ``start_delay`` has passed
 after that, so the rest of the graph has time to discover itself. Later,
 while fewer subscribers are matched (a node restarting), the commander
-pauses and resumes when they are back. A node that crashes is noticed only
+pauses and resumes ``start_delay`` after they are back. A node that crashes is noticed only
 when DDS drops it (its lease, 20 s by default), so commands sent before then
 are lost to it.
 """
@@ -65,7 +65,6 @@ class MotionCommander(Node):
         self._limit = self._command_limit()
         self._sent = 0
         self._ready_since: float | None = None
-        self._paused = False
         self._publisher = self.create_publisher(Int32, "motion_cmd", INPUT_QOS)
         self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
         self.get_logger().info(
@@ -109,13 +108,12 @@ class MotionCommander(Node):
             self._finish()
             return
         if self._publisher.get_subscription_count() < self._values["required_subscribers"]:
-            if not self._paused:
-                self._paused = True
-                self.get_logger().warning("a subscriber left motion_cmd: paused until it is back")
+            self.get_logger().warning("a subscriber left motion_cmd: paused until it is back")
+            self._timer.cancel()
+            self.destroy_timer(self._timer)
+            self._ready_since = None
+            self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
             return
-        if self._paused:
-            self._paused = False
-            self.get_logger().info("subscribers back: resuming")
         command = int(self._commands[self._sent % len(self._commands)])
         self._publisher.publish(Int32(data=command))
         self._sent += 1

@@ -16,15 +16,9 @@ from std_msgs.msg import Float64MultiArray, Int64, String
 from estimation_nodes.core import HistogramModel, histogram
 from estimation_nodes.nodes.ros_common import INPUT_QOS
 from tests.conftest import SCENARIOS, spin_until
+from tests.graph.graph_tools import beliefs, executable, start_graph, wait_for_commander
 
 EXECUTABLES = ("motion_commander", "tile_sensor", "estimator", "estimation_demo")
-
-
-def executable(name: str) -> str:
-    """What `ros2 run estimation_nodes <name>` runs: <prefix>/lib/estimation_nodes/<name>."""
-    from ament_index_python.packages import get_package_prefix
-
-    return str(Path(get_package_prefix("estimation_nodes")) / "lib" / "estimation_nodes" / name)
 
 
 def test_ros2_run_finds_every_executable():
@@ -48,28 +42,6 @@ def test_source_package_xml_parses():
 
     package = parse_package(str(Path(__file__).resolve().parents[2] / "package.xml"))
     assert package.get_build_type() == "ament_python"
-
-
-def start_graph(processes, scenario: Path, *extra_commander_args: str):
-    started = {}
-    for name in ("estimator", "tile_sensor", "motion_commander"):
-        command = [executable(name), "--ros-args", "--params-file", str(scenario)]
-        if name == "motion_commander":
-            command += ["-p", "start_delay:=0.5", "-p", "exit_when_done:=true",
-                        *extra_commander_args]
-        started[name] = processes(command)
-    return started
-
-
-def wait_for_commander(executor, started, timeout=60.0):
-    commander = started["motion_commander"]
-    assert spin_until(executor, lambda: commander.poll() is not None, timeout), \
-        "the commander did not finish"
-    assert commander.returncode == 0, commander.stdout.read()
-
-
-def beliefs(messages):
-    return [np.frombuffer(m.data, dtype=np.float64) for m in messages]
 
 
 def test_example_6_14_end_to_end(processes, executor, collector_factory):

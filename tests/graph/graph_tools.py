@@ -1,0 +1,62 @@
+"""Helpers for the graph tests: find executables as ros2 run does, start and watch the graph."""
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from tests.conftest import spin_until
+
+NODES = ("estimator", "tile_sensor", "motion_commander")
+
+
+def executable(name: str) -> str:
+    """What `ros2 run estimation_nodes <name>` runs: <prefix>/lib/estimation_nodes/<name>."""
+    from ament_index_python.packages import get_package_prefix
+
+    return str(Path(get_package_prefix("estimation_nodes")) / "lib" / "estimation_nodes" / name)
+
+
+def node_command(name: str, scenario: Path, *args: str) -> list[str]:
+    return [executable(name), "--ros-args", "--params-file", str(scenario), *args]
+
+
+def start_graph(processes, scenario: Path, *commander_args: str, skip=()):
+    """Start the three nodes (minus ``skip``); the commander exits after its last command."""
+    started = {}
+    for name in NODES:
+        if name in skip:
+            continue
+        extra = ["-p", "start_delay:=0.5", "-p", "exit_when_done:=true", *commander_args] \
+            if name == "motion_commander" else []
+        started[name] = processes(node_command(name, scenario, *extra))
+    return started
+
+
+def wait_for_commander(executor, started, timeout=60.0):
+    commander = started["motion_commander"]
+    assert spin_until(executor, lambda: commander.poll() is not None, timeout), \
+        "the commander did not finish"
+    assert commander.returncode == 0, commander.stdout.read()
+
+
+def beliefs(messages):
+    return [np.frombuffer(m.data, dtype=np.float64) for m in messages]
+
+
+def resident_kib(pid: int) -> int:
+    """Resident memory of a process in KiB (VmRSS)."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1])
+    raise RuntimeError(f"no VmRSS for {pid}")
+
+
+def wait_seconds(executor, seconds: float) -> None:
+    """Keep spinning (so subscriptions are served) for a while."""
+    spin_until(executor, lambda: False, seconds)
+
+
+def stopwatch():
+    start = time.monotonic()
+    return lambda: time.monotonic() - start

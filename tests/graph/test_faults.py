@@ -1,0 +1,250 @@
+"""Faults and load: nodes that die and come back, floods, late and transient peers."""
+
+import signal
+
+import numpy as np
+import pytest
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray
+from std_msgs.msg import Float64, Float64MultiArray, Int32, Int64, String
+
+from estimation_nodes.core import HistogramModel, histogram
+from estimation_nodes.nodes.ros_common import INPUT_QOS
+from tests.conftest import SCENARIOS, spin_until
+from tests.graph.graph_tools import (
+    beliefs,
+    node_command,
+    resident_kib,
+    start_graph,
+    wait_for_commander,
+    wait_seconds,
+)
+
+LOCALIZATION = SCENARIOS / "localization.yaml"
+
+
+def localization_model() -> HistogramModel:
+    params = yaml.safe_load(LOCALIZATION.read_text())["/estimator"]["ros__parameters"]
+    return HistogramModel.from_lists(params["world"], params["classes"],
+                                     params["sensor_model"], params["motion_kernel"])
+
+
+def assert_distributions(vectors):
+    for vector in vectors:
+        assert np.all(np.isfinite(vector)) and np.all(vector >= 0.0)
+        np.testing.assert_allclose(vector.sum(), 1.0, atol=1e-12)
+
+
+def hit_rate(corrected, truth):
+    size = corrected[0].size
+    hits = [int(np.argmax(b)) == t % size for b, t in zip(corrected, truth)]
+    return sum(hits) / len(hits)
+
+
+def test_sensor_restarted_mid_run_estimator_keeps_localizing(
+        processes, executor, collector_factory):
+    seen = collector_factory({"belief": Float64MultiArray, "true_position": Int64})
+    started = start_graph(processes, LOCALIZATION, "-p", "max_commands:=60", "-p",
+                          "rate_hz:=10.0", "-p", "start_delay:=1.5")
+    assert spin_until(executor, lambda: seen.count("belief") >= 25, 30.0)
+    sensor = started["tile_sensor"]
+    sensor.send_signal(signal.SIGINT)   # a supervisor restarting it
+    assert spin_until(executor, lambda: sensor.poll() is not None, 10.0)
+    before = seen.count("true_position")
+    last_truth = seen.messages["true_position"][-1].data
+    # The robot has not moved while its sensor was down: the commander paused.
+    processes(node_command("tile_sensor", LOCALIZATION, "-p", f"initial_cell:={last_truth}",
+                           "-p", "seed:=2"))
+    wait_for_commander(executor, started, timeout=60.0)
+    assert spin_until(executor, lambda: seen.count("true_position") >= 60, 20.0)
+    wait_seconds(executor, 0.5)
+    assert started["estimator"].poll() is None, "the estimator died"
+    assert seen.count("belief") == 60, "an observation was lost across the restart"
+    corrected = beliefs(seen.messages["belief"])
+    truth = [m.data for m in seen.messages["true_position"]]
+    assert_distributions(corrected)
+    after = hit_rate(corrected[before:], truth[before:])
+    print(f"after the sensor restart the most likely cell was the true one in "
+          f"{after:.0%} of {len(truth) - before} steps")
+    assert after >= 0.6
+
+
+def predictions_between(previous, corrected, observed, model):
+    """How many u = 1 predictions (0 to 4) turn ``previous`` into ``corrected`` given the
+    observation; None when no number does.
+
+    Events of different topics reach the estimator in no guaranteed order (a
+    command can arrive after the observation it caused, mostly in the first
+    second after discovery, when delayed commands may come in a burst), and it
+    handles them in arrival order, so a correction may follow several
+    predictions or none.
+    """
+    belief = previous
+    for count in range(5):
+        candidate, _ = histogram.correct(belief, model.likelihood(observed))
+        if np.allclose(candidate, corrected, rtol=0.0, atol=1e-12):
+            return count
+        belief = histogram.predict(belief, 1, model.kernel)
+    return None
+
+
+def test_estimator_killed_and_restarted_comes_back_from_initial_state(
+        processes, executor, collector_factory):
+    seen = collector_factory({"belief_predicted": Float64MultiArray,
+                              "belief": Float64MultiArray,
+                              "tile_observation": (String, INPUT_QOS)})
+    started = start_graph(processes, LOCALIZATION, "-p", "max_commands:=50", "-p",
+                          "rate_hz:=10.0")
+    assert spin_until(executor, lambda: seen.count("belief") >= 15, 30.0)
+    started["estimator"].kill()   # a crash, not a clean stop
+    started["estimator"].wait(timeout=10)
+    wait_seconds(executor, 0.5)   # take what the dead estimator had already sent
+    predicted_before, corrected_before = seen.count("belief_predicted"), seen.count("belief")
+    restarted = processes(node_command("estimator", LOCALIZATION))
+    wait_for_commander(executor, started, timeout=60.0)
+    wait_seconds(executor, 1.0)
+    assert restarted.poll() is None and started["tile_sensor"].poll() is None
+    new_predicted = beliefs(seen.messages["belief_predicted"][predicted_before:])
+    new_corrected = beliefs(seen.messages["belief"][corrected_before:])
+    assert len(new_corrected) >= 10, "the graph did not carry on with the new estimator"
+    assert_distributions(new_predicted + new_corrected)
+    observations = [m.data for m in seen.messages["tile_observation"]]
+    received = observations[len(observations) - len(new_corrected):]
+    model = localization_model()
+    # Back from its initial state: its first belief is the uniform prior corrected by
+    # its first observation (a prediction leaves a uniform belief as it is).
+    first, _ = histogram.correct(histogram.uniform(model.size), model.likelihood(received[0]))
+    np.testing.assert_allclose(new_corrected[0], first, atol=1e-12)
+    # And from there exactly the filter over the events it received.
+    counts = [predictions_between(previous, corrected, observed, model)
+              for previous, corrected, observed
+              in zip(new_corrected, new_corrected[1:], received[1:])]
+    assert None not in counts, f"a belief the filter cannot explain: {counts}"
+
+
+def diagnostics_values(msg: DiagnosticArray) -> dict:
+    [status] = msg.status
+    return {kv.key: kv.value for kv in status.values}
+
+
+def test_flood_is_handled_or_counted_memory_bounded_then_correct_again(
+        processes, executor, collector_factory, context):
+    estimator = processes(node_command("estimator", SCENARIOS / "example_6_14.yaml",
+                                       "-p", "diagnostics_period:=0.2"))
+    seen = collector_factory({"belief": Float64MultiArray, "belief_predicted": Float64MultiArray,
+                              "/diagnostics": (DiagnosticArray, 10)})
+    node = seen.node
+    cmd = node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+    tile = node.create_publisher(String, "tile_observation", INPUT_QOS)
+    z = node.create_publisher(Float64, "position_measurement", INPUT_QOS)
+    assert spin_until(executor, lambda: min(p.get_subscription_count()
+                                            for p in (cmd, tile, z)) >= 1, 20.0)
+    assert spin_until(executor, lambda: seen.count("/diagnostics") >= 1, 10.0)
+    rss_before = resident_kib(estimator.pid)
+    rng = np.random.default_rng(3)
+    sent = 0
+    # About 3 s of 3 topics at several hundred events per second each, far above the
+    # demo's 2 commands per second; bad messages mixed in.
+    for round_ in range(1500):
+        cmd.publish(Int32(data=int(rng.integers(-3, 4))))
+        tile.publish(String(data="purple" if round_ % 100 == 0 else
+                            ("dark", "bright")[int(rng.integers(0, 2))]))
+        z.publish(Float64(data=float("nan") if round_ % 50 == 0 else float(rng.normal())))
+        sent += 1
+        if round_ % 50 == 0:
+            executor.spin_once(timeout_sec=0.0)
+        wait_seconds(executor, 0.001)
+
+    def accounted() -> bool:
+        values = diagnostics_values(seen.messages["/diagnostics"][-1])
+        counts = {k: int(v) for k, v in values.items() if k.startswith(("handled.", "rejected."))}
+        per_topic = {
+            "motion_cmd": counts.get("handled.motion_cmd", 0)
+            + counts.get("rejected.lost.motion_cmd", 0),
+            "tile_observation": counts.get("handled.tile_observation", 0)
+            + counts.get("rejected.unknown_class", 0)
+            + counts.get("rejected.lost.tile_observation", 0),
+            "position_measurement": counts.get("handled.position_measurement", 0)
+            + counts.get("rejected.non_finite_measurement", 0)
+            + counts.get("rejected.lost.position_measurement", 0),
+        }
+        return all(total == sent for total in per_topic.values())
+
+    assert spin_until(executor, accounted, 60.0), diagnostics_values(
+        seen.messages["/diagnostics"][-1])
+    values = diagnostics_values(seen.messages["/diagnostics"][-1])
+    assert int(values["rejected.unknown_class"]) == 15
+    assert int(values["rejected.non_finite_measurement"]) == 30
+    rss_after = resident_kib(estimator.pid)
+    print(f"flood: {sent} events on each of 3 topics; estimator RSS {rss_before} KiB -> "
+          f"{rss_after} KiB (+{rss_after - rss_before} KiB); counters {values}")
+    assert rss_after - rss_before < 64 * 1024
+    assert estimator.poll() is None
+    assert_distributions(beliefs(seen.messages["belief"]))
+
+    # After the flood: reset, then Example 6.14 comes out exactly.
+    from std_srvs.srv import Trigger
+
+    client = node.create_client(Trigger, "/estimator/reset")
+    assert client.wait_for_service(timeout_sec=10.0)
+    future = client.call_async(Trigger.Request())
+    assert spin_until(executor, future.done, 10.0) and future.result().success
+    start = seen.count("belief")
+    for step, observed in enumerate(["bright", "dark", "dark"], start=1):
+        predicted_count = seen.count("belief_predicted")
+        cmd.publish(Int32(data=1))
+        assert spin_until(executor, lambda n=predicted_count: seen.count("belief_predicted") > n,
+                          10.0)
+        tile.publish(String(data=observed))
+        assert spin_until(executor, lambda n=start + step: seen.count("belief") >= n, 10.0)
+    np.testing.assert_allclose(beliefs(seen.messages["belief"])[-1],
+                               [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
+
+
+def test_late_subscriber_gets_the_latest_estimates(processes, executor, collector_factory):
+    started = start_graph(processes, SCENARIOS / "example_6_14.yaml")
+    wait_for_commander(executor, started)
+    wait_seconds(executor, 0.5)
+    # Joins after the last estimate was published.
+    late = collector_factory({"belief": Float64MultiArray}, name="late_subscriber")
+    assert spin_until(executor, lambda: late.count("belief") >= 3, 20.0)
+    np.testing.assert_allclose(beliefs(late.messages["belief"])[-1],
+                               [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
+
+
+def test_command_publishers_that_come_and_go(processes, executor, context, collector_factory):
+    from rclpy.node import Node
+
+    processes(node_command("estimator", SCENARIOS / "example_6_14.yaml"))
+    seen = collector_factory({"belief_predicted": Float64MultiArray})
+    for index in range(3):
+        publisher_node = Node(f"transient_commander_{index}", context=context)
+        executor.add_node(publisher_node)
+        pub = publisher_node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+        assert spin_until(executor, lambda p=pub: p.get_subscription_count() >= 1, 20.0)
+        pub.publish(Int32(data=1))
+        assert spin_until(executor, lambda n=index + 1: seen.count("belief_predicted") >= n,
+                          10.0)
+        executor.remove_node(publisher_node)
+        publisher_node.destroy_node()
+    assert_distributions(beliefs(seen.messages["belief_predicted"]))
+
+
+@pytest.mark.parametrize("args, message", [
+    (["-p", "motion_kernel:=[0.1, 0.8, 0.2]"], "summing to 1"),
+    (["-p", "sensor_model:=[0.8, 0.2, 0.4]"], "sensor_model"),
+    (["-p", "world:=[bright, purple]"], "purple"),
+    (["-p", "initial_belief:=[1.0, 2.0]"], "initial_belief: expected 5 values"),
+    (["-p", "kalman.var_z:=-4.0"], "var_z: expected a number > 0"),
+    (["-p", "kalman.matrix.Q:=[1.0, 2.0, 2.0, 1.0]"], "kalman.matrix.Q"),
+])
+def test_bad_start_up_parameters_exit_2_naming_the_parameter(ros_env, args, message):
+    import subprocess
+
+    from tests.graph.graph_tools import executable
+
+    result = subprocess.run([executable("estimator"), "--ros-args", *args], env=ros_env,
+                            capture_output=True, text=True, timeout=60)
+    output = (result.stdout + result.stderr).strip().splitlines()
+    assert result.returncode == 2 and len(output) == 1, output
+    assert message in output[0] and "Traceback" not in output[0]
