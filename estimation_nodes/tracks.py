@@ -53,7 +53,10 @@ class HistogramTrack:
     def correct(self, observed: str) -> FloatArray:
         """Correct with a tile observation; raises ValueError (unknown class, zero evidence)."""
         likelihood = self._settings.histogram.likelihood(observed)
-        self.belief, self.last_evidence = histogram.correct(self.belief, likelihood)
+        # In place: the belief is this track's own array (predict and reset make new
+        # ones, and publishing copies it), and correct() leaves it alone on an error.
+        self.belief, self.last_evidence = histogram.correct(
+            self.belief, likelihood, out=self.belief)
         return self.belief
 
 

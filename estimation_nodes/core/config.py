@@ -289,6 +289,10 @@ class LinearGaussianModel:
     F: FloatArray
     Q: FloatArray
     R: FloatArray
+    #: F Q F', the process noise in state space.
+    process_noise: FloatArray = field(init=False, repr=False, compare=False)
+    #: The n x n identity, for the Joseph form.
+    identity: FloatArray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         A = as_finite_array("A", self.A, ndim=2)
@@ -311,6 +315,14 @@ class LinearGaussianModel:
         R = check_covariance("R", self.R, C.shape[0])
         for name, matrix in (("A", A), ("B", B), ("C", C), ("F", F), ("Q", Q), ("R", R)):
             object.__setattr__(self, name, matrix)
+        # Fixed per model, so computed once rather than at every step.
+        process_noise = F @ Q @ F.T
+        process_noise = 0.5 * (process_noise + process_noise.T)
+        process_noise.setflags(write=False)
+        identity = np.eye(n)
+        identity.setflags(write=False)
+        object.__setattr__(self, "process_noise", process_noise)
+        object.__setattr__(self, "identity", identity)
 
     @property
     def state_size(self) -> int:

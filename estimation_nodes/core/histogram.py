@@ -40,25 +40,31 @@ def one_hot(size: int, cell: int) -> FloatArray:
     return belief
 
 
-def _add_rolled(
-    out: FloatArray, source: FloatArray, shift: int, weight: float, scratch: FloatArray
-) -> None:
-    """out += weight * roll(source, shift), in place, without allocating.
+def _wrapped(belief: FloatArray, shift: int, half_width: int) -> FloatArray:
+    """roll(belief, shift) with ``half_width`` cells of cyclic padding on either side.
 
-    ``shift`` is in [0, N). Splitting at the wrap point gives two contiguous
-    slices, so each tap is one multiply and one add streaming over N doubles.
+    ``padded[half_width + i] == belief[(i - shift) mod N]``, so a 'valid'
+    convolution of the result with the kernel is the cyclic prediction.
     """
-    n = source.size
+    n = belief.size
+    h = half_width
+    if h > n:   # a kernel wider than the world wraps more than once
+        return belief[(np.arange(-h, n + h) - shift) % n]
+    padded = np.empty(n + 2 * h)
     head = n - shift
-    np.multiply(source[:head], weight, out=scratch[shift:])
-    np.multiply(source[head:], weight, out=scratch[:shift])
-    np.add(out, scratch, out=out)
+    padded[h + shift : h + n] = belief[:head]
+    padded[h : h + shift] = belief[head:]
+    padded[:h] = padded[n : n + h]
+    padded[n + h :] = padded[h : 2 * h]
+    return padded
 
 
 def predict(belief: FloatArray, u: int, kernel: MotionKernel) -> FloatArray:
     """Belief after a move of ``u`` cells (any integer, either direction).
 
-    Runs in O(N * len(kernel)) time and O(N) memory: no N x N matrix.
+    Runs in O(N * len(kernel)) time and O(N) memory: no N x N matrix. The
+    shift and the wrap-around are one copy into a padded buffer; the kernel
+    is then one 'valid' convolution, a single pass in numpy's C code.
 
     Parameters
     ----------
@@ -75,18 +81,21 @@ def predict(belief: FloatArray, u: int, kernel: MotionKernel) -> FloatArray:
         The predicted belief.
     """
     source = np.asarray(belief, dtype=np.float64)
-    n = source.size
-    predicted = np.zeros(n)
-    scratch = np.empty(n)
     # Python ints: a huge u wraps exactly instead of overflowing a fixed-width type.
-    for offset, weight in zip(kernel.offsets.tolist(), kernel.weights.tolist()):
-        if weight != 0.0:
-            _add_rolled(predicted, source, (int(u) + offset) % n, weight, scratch)
-    return predicted
+    padded = _wrapped(source, int(u) % source.size, kernel.half_width)
+    # convolve(padded, w)[i] = sum_k w[k] padded[i + 2h - k] = sum_k w[k] belief[i - u - (k - h)]
+    return np.convolve(padded, kernel.weights, mode="valid")
 
 
-def correct(belief: FloatArray, likelihood: FloatArray) -> tuple[FloatArray, float]:
+def correct(
+    belief: FloatArray, likelihood: FloatArray, out: FloatArray | None = None
+) -> tuple[FloatArray, float]:
     """Posterior belief and evidence p(z | earlier data) after one observation.
+
+    The posterior is a new array unless ``out`` is given (it may be ``belief``
+    itself, for a caller that owns it: large worlds then allocate nothing).
+    ``out`` is written only after the evidence is known to be positive, so a
+    rejected observation leaves it as it was.
 
     Raises
     ------
@@ -94,14 +103,15 @@ def correct(belief: FloatArray, likelihood: FloatArray) -> tuple[FloatArray, flo
         If the observation is impossible in every cell the belief allows
         (p(z) = 0); the caller keeps its belief, nothing is divided by zero.
     """
-    unnormalized = np.multiply(belief, likelihood)
-    evidence = float(unnormalized.sum())
+    # The evidence as a dot product reads both arrays once, without a temporary.
+    evidence = float(np.dot(belief, likelihood))
     if not evidence > 0.0 or not np.isfinite(evidence):
         raise ZeroEvidenceError(
             f"observation has evidence {evidence!r}: every cell of the belief rules it out"
         )
-    unnormalized /= evidence
-    return unnormalized, evidence
+    posterior = np.multiply(belief, likelihood, out=out)
+    np.multiply(posterior, 1.0 / evidence, out=posterior)
+    return posterior, evidence
 
 
 def most_likely_cell(belief: FloatArray) -> int:

@@ -23,6 +23,7 @@ from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
 
 from estimation_nodes.core import histogram
+from estimation_nodes.memory import keep_freed_memory
 from estimation_nodes.nodes.ros_common import (
     INPUT_QOS,
     ConfigurationError,
@@ -200,7 +201,10 @@ class Estimator(Node):
         self._diagnostics_pub.publish(array)
 
 
-main = main_for(Estimator)
+def main(args: list[str] | None = None) -> None:
+    # A process-wide choice, so it is made here and not in the node: see memory.py.
+    keep_freed_memory()
+    main_for(Estimator)(args)
 
 if __name__ == "__main__":
     main()

@@ -115,3 +115,20 @@ def test_random_worlds_against_loop_oracle_seeded():
 def test_entropy_bounds():
     assert histogram.entropy(histogram.one_hot(8, 3)) == 0.0
     np.testing.assert_allclose(histogram.entropy(histogram.uniform(8)), 3.0, rtol=1e-12)
+
+
+def test_correct_into_out_matches_and_is_untouched_on_zero_evidence():
+    rng = np.random.default_rng(5)
+    belief = rng.random(50)
+    belief /= belief.sum()
+    likelihood = rng.uniform(0.1, 1.0, 50)
+    expected, expected_evidence = histogram.correct(belief, likelihood)
+    owned = belief.copy()
+    posterior, evidence = histogram.correct(owned, likelihood, out=owned)
+    assert posterior is owned
+    np.testing.assert_array_equal(posterior, expected)
+    assert evidence == expected_evidence
+    hot = histogram.one_hot(50, 3)
+    with pytest.raises(histogram.ZeroEvidenceError):
+        histogram.correct(hot, np.where(np.arange(50) == 3, 0.0, 1.0), out=hot)
+    np.testing.assert_array_equal(hot, histogram.one_hot(50, 3))
