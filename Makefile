@@ -13,7 +13,7 @@ ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 ROS_DOMAIN_ID ?= 42
 export ROS_AUTOMATIC_DISCOVERY_RANGE ROS_DOMAIN_ID
 
-.PHONY: demo test install clean
+.PHONY: demo test bench install clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -30,6 +30,14 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/python -m pytest $(PYTEST_ARGS)
+
+# Benchmarks print tables of figures with ratios to references measured in the
+# same run (see bench/README.md); they assert nothing and take a few minutes.
+bench: $(STAMP)
+	$(BIN)/python bench/core_bench.py
+	$(BIN)/python bench/dds_bench.py
+	$(BIN)/python bench/large_world_bench.py
+	$(BIN)/python bench/startup_bench.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

@@ -16,7 +16,7 @@ from estimation_nodes.nodes.ros_common import INPUT_QOS, latched_qos
 class Relay(Node):
     def __init__(self) -> None:
         super().__init__("relay")
-        self._pub = self.create_publisher(String, "relay_out", latched_qos(1))
+        self._pub = self.create_publisher(String, "relay_out", latched_qos(1000))
         self.create_subscription(String, "tile_observation", self._pub.publish, INPUT_QOS)
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -48,6 +49,9 @@ class ParamSpec:
 WORLD_SPECS = (
     ParamSpec("world", list(BOOK_WORLD),
               "Class name of each cell of the cyclic world, in order (index 0 first)."),
+    ParamSpec("world_file", "",
+              "Path of a UTF-8 text file with the class name of each cell, separated by white "
+              "space; when set it replaces 'world' (for large worlds).", read_only=True),
     ParamSpec("classes", list(BOOK_CLASSES), "Names of the tile classes the sensor reports."),
     ParamSpec("sensor_model", [p for row in BOOK_SENSOR_MODEL for p in row],
               "p(observed class | true class), row-major: one row per true class in the "
@@ -100,10 +104,26 @@ def as_list(name: str, value: Any) -> list:
     return list(value)
 
 
+def read_world_file(path_text: str) -> list[str]:
+    """The class names in a world file; ValueError with a one-line reason otherwise."""
+    path = Path(path_text).expanduser()
+    if not path.is_file():
+        raise ValueError(f"world_file: {path_text!r} is not a file")
+    try:
+        names = path.read_text(encoding="utf-8").split()
+    except (OSError, UnicodeDecodeError) as error:
+        raise ValueError(f"world_file: cannot read {path_text!r}: {error}") from None
+    if not names:
+        raise ValueError(f"world_file: {path_text!r} names no cells")
+    return names
+
+
 def build_histogram_model(values: Mapping[str, Any]) -> HistogramModel:
     """The world, sensor model and motion kernel from parameter values."""
+    world_file = values.get("world_file") or ""
+    world = read_world_file(world_file) if world_file else as_list("world", values["world"])
     return HistogramModel.from_lists(
-        world=as_list("world", values["world"]),
+        world=world,
         classes=as_list("classes", values["classes"]),
         sensor_model=as_list("sensor_model", values["sensor_model"]),
         kernel=as_list("motion_kernel", values["motion_kernel"]),

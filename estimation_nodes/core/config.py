@@ -190,7 +190,10 @@ class HistogramModel:
     _likelihoods: FloatArray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        world = tuple(str(name) for name in self.world)
+        # Each cell refers to the sensor model's own name object where it can: a
+        # million cells read from a file then hold pointers, not a million strings.
+        canonical = {name: name for name in self.sensor.classes}
+        world = tuple(canonical.get(name, name) for name in map(str, self.world))
         if not world:
             raise ValueError("world: expected at least one cell, got an empty list")
         lookup = {name: index for index, name in enumerate(self.sensor.classes)}

@@ -114,3 +114,33 @@ def test_models_are_immutable():
     sensor = SensorModel(BOOK_CLASSES, np.array(BOOK_SENSOR_MODEL))
     with pytest.raises(ValueError):
         sensor.probabilities[0, 0] = 1.0
+
+
+def test_world_file_replaces_world(tmp_path):
+    from estimation_nodes.settings import ESTIMATOR_SPECS, build_histogram_model, spec_defaults
+
+    path = tmp_path / "world.txt"
+    path.write_text("dark bright\nbright  dark\n")
+    values = spec_defaults(ESTIMATOR_SPECS) | {"world_file": str(path)}
+    model = build_histogram_model(values)
+    assert model.world == ("dark", "bright", "bright", "dark")
+    # Cells share the class-name objects of the sensor model.
+    assert model.world[0] is model.sensor.classes[1]
+
+
+@pytest.mark.parametrize("content, message", [
+    (None, "is not a file"),
+    ("", "names no cells"),
+    ("dark purple", r"world: cells name classes \['purple'\]"),
+    (b"\xff\xfe", "cannot read"),
+])
+def test_world_file_errors(tmp_path, content, message):
+    from estimation_nodes.settings import ESTIMATOR_SPECS, build_histogram_model, spec_defaults
+
+    path = tmp_path / "world.txt"
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    elif content is not None:
+        path.write_text(content)
+    with pytest.raises(ValueError, match=message):
+        build_histogram_model(spec_defaults(ESTIMATOR_SPECS) | {"world_file": str(path)})

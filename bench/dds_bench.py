@@ -1,0 +1,186 @@
+"""Latency and throughput through DDS: the estimator against a bare rclpy relay.
+
+    python bench/dds_bench.py [--events 3000] [--rounds 3]
+
+A driver node (this process) publishes ``tile_observation`` and waits for
+the answer: the estimator's corrected ``belief`` (N = 5, the book's world),
+or the same String back from bench/relay_node.py on ``relay_out``. The
+estimator and the relay run as separate processes, one at a time, in
+alternating rounds, so both see the same machine. Latency: one message in
+flight, publish to receipt, p50 and p99. Throughput: a window of 100 in
+flight (inside the subscriptions' depth of 1000, so nothing may be lost),
+events per second until every answer is back; a lost message fails the run.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from timing import table  # noqa: E402
+
+BENCH = Path(__file__).resolve().parent
+WINDOW = 100
+
+
+def start(kind: str, env: dict) -> subprocess.Popen:
+    if kind == "estimator":
+        command = [sys.executable, "-m", "estimation_nodes.nodes.estimator", "--ros-args",
+                   "-p", "history_depth:=1000", "--log-level", "warn"]
+    else:
+        command = [sys.executable, str(BENCH / "relay_node.py")]
+    return subprocess.Popen(command, env=env)
+
+
+def stop(process: subprocess.Popen) -> None:
+    process.send_signal(signal.SIGINT)
+    try:
+        process.wait(timeout=10)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        process.wait()
+
+
+class Driver:
+    """Publishes observations and counts answers on one topic."""
+
+    def __init__(self, answer_topic: str, answer_type, qos) -> None:
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+        from std_msgs.msg import String
+
+        from estimation_nodes.nodes.ros_common import INPUT_QOS
+
+        self.node = Node(f"bench_driver_{answer_topic}")
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+        self.received = 0
+        self.arrivals: list[int] = []
+        self.pub = self.node.create_publisher(String, "tile_observation", INPUT_QOS)
+        self.node.create_subscription(answer_type, answer_topic, self._on_answer, qos)
+        self.messages = [String(data=name) for name in ("dark", "bright")]
+
+    def _on_answer(self, _msg) -> None:
+        self.arrivals.append(time.perf_counter_ns())
+        self.received += 1
+
+    def wait_until(self, predicate, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return True
+            self.executor.spin_once(timeout_sec=0.05)
+        return predicate()
+
+    def connect(self, timeout: float = 30.0) -> None:
+        """Matched both ways, and one answer received (the whole path is up)."""
+        if not self.wait_until(lambda: self.pub.get_subscription_count() >= 1, timeout):
+            raise RuntimeError("no subscriber on tile_observation")
+        self.pub.publish(self.messages[0])
+        if not self.wait_until(lambda: self.received >= 1, timeout):
+            raise RuntimeError("no answer")
+        # The transient_local history of a late match can add one more: let it arrive.
+        self.wait_until(lambda: False, 0.5)
+
+    def latency(self, events: int) -> np.ndarray:
+        samples = np.empty(events)
+        for index in range(events):
+            target = self.received + 1
+            start = time.perf_counter_ns()
+            self.pub.publish(self.messages[index % 2])
+            while self.received < target:
+                self.executor.spin_once(timeout_sec=1.0)
+            samples[index] = (self.arrivals[-1] - start) / 1e3
+        return samples
+
+    def throughput(self, events: int) -> float:
+        base = self.received
+        sent = 0
+        start = time.perf_counter()
+        while sent < events:
+            if sent - (self.received - base) < WINDOW:
+                self.pub.publish(self.messages[sent % 2])
+                sent += 1
+                self.executor.spin_once(timeout_sec=0.0)
+            else:
+                self.executor.spin_once(timeout_sec=0.01)
+        if not self.wait_until(lambda: self.received - base >= events, 30.0):
+            raise RuntimeError(f"lost: {events - (self.received - base)} of {events}")
+        return events / (time.perf_counter() - start)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+
+
+def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float]:
+    from std_msgs.msg import Float64MultiArray, String
+
+    from estimation_nodes.nodes.ros_common import latched_qos
+
+    process = start(kind, env)
+    if kind == "estimator":
+        driver = Driver("belief", Float64MultiArray, latched_qos(1000))
+    else:
+        driver = Driver("relay_out", String, latched_qos(1000))
+    try:
+        driver.connect()
+        driver.latency(200)   # warm-up
+        latencies = driver.latency(events)
+        rate = driver.throughput(events)
+        return latencies, rate
+    finally:
+        driver.close()
+        stop(process)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--events", type=int, default=3000)
+    parser.add_argument("--rounds", type=int, default=3)
+    args = parser.parse_args()
+    env = dict(os.environ)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env.setdefault("ROS_DOMAIN_ID", "77")
+    os.environ.update(env)
+    import rclpy
+
+    rclpy.init()
+    results: dict[str, dict[str, list]] = {k: {"lat": [], "rate": []}
+                                           for k in ("estimator", "relay")}
+    try:
+        for _ in range(args.rounds):
+            for kind in ("relay", "estimator"):
+                latencies, rate = measure(kind, env, args.events)
+                results[kind]["lat"].append(latencies)
+                results[kind]["rate"].append(rate)
+    finally:
+        rclpy.try_shutdown()
+    rows = []
+    for kind in ("estimator", "relay"):
+        lat = np.concatenate(results[kind]["lat"])
+        rates = results[kind]["rate"]
+        rows.append([kind, f"{np.percentile(lat, 50):.0f}", f"{np.percentile(lat, 99):.0f}",
+                     f"{np.median(rates):.0f}", f"{min(rates):.0f}..{max(rates):.0f}"])
+    est = np.concatenate(results["estimator"]["lat"])
+    rel = np.concatenate(results["relay"]["lat"])
+    ratio_rate = np.median(results["estimator"]["rate"]) / np.median(results["relay"]["rate"])
+    print(f"DDS: {args.rounds} rounds x {args.events} events each, N = 5, "
+          f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}")
+    print(table(["node", "latency p50 (us)", "latency p99 (us)", "throughput (events/s, median)",
+                 "throughput range"], rows))
+    print(f"estimator / relay: p50 {np.percentile(est, 50) / np.percentile(rel, 50):.2f}, "
+          f"p99 {np.percentile(est, 99) / np.percentile(rel, 99):.2f}, "
+          f"throughput {ratio_rate:.2f}")
+
+
+if __name__ == "__main__":
+    main()

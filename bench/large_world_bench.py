@@ -1,0 +1,146 @@
+"""A large world end to end: full steps per second and the estimator's memory.
+
+    python bench/large_world_bench.py [--cells 1000000] [--steps 30]
+
+The estimator runs as its own process on a world of N cells read from a
+world_file (seeded random dark and bright). A driver here sends a
+``motion_cmd`` and then a ``tile_observation`` and waits for the corrected
+``belief`` (N doubles) to arrive: one full step, including both published
+belief messages. The estimator's resident memory (VmRSS) is compared with
+that of a bare rclpy node (bench/relay_node.py, idle) plus 3 x N x 8 bytes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from dds_bench import start, stop  # noqa: E402
+from timing import table  # noqa: E402
+
+BENCH = Path(__file__).resolve().parent
+
+
+def resident_mib(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmRSS:"):
+            return int(line.split()[1]) / 1024
+    raise RuntimeError(f"no VmRSS for {pid}")
+
+
+def write_world(cells: int, directory: Path) -> Path:
+    rng = np.random.default_rng(cells)
+    names = np.where(rng.random(cells) < 0.5, "dark", "bright")
+    path = directory / f"world_{cells}.txt"
+    path.write_text("\n".join(names.tolist()) + "\n", encoding="utf-8")
+    return path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--cells", type=int, default=1_000_000)
+    parser.add_argument("--steps", type=int, default=30)
+    args = parser.parse_args()
+    env = dict(os.environ)
+    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    env.setdefault("ROS_DOMAIN_ID", "78")
+    os.environ.update(env)
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from std_msgs.msg import Float64MultiArray, Int32, String
+
+    from estimation_nodes.nodes.ros_common import INPUT_QOS, latched_qos
+
+    rclpy.init()
+    with tempfile.TemporaryDirectory() as tmp:
+        world = write_world(args.cells, Path(tmp))
+        bare = start("relay", env)
+        started = time.perf_counter()
+        estimator = subprocess_estimator(world, env)
+        node = Node("large_world_driver")
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        beliefs: list[float] = []
+        predicted: list[float] = []
+        sizes: set[int] = set()
+
+        def on_belief(msg) -> None:
+            beliefs.append(time.perf_counter())
+            sizes.add(len(msg.data))
+
+        node.create_subscription(Float64MultiArray, "belief", on_belief, latched_qos(1))
+        node.create_subscription(Float64MultiArray, "belief_predicted",
+                                 lambda m: predicted.append(time.perf_counter()),
+                                 latched_qos(1))
+        cmd = node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+        tile = node.create_publisher(String, "tile_observation", INPUT_QOS)
+
+        def spin_until(predicate, timeout=120.0):
+            deadline = time.monotonic() + timeout
+            while not predicate():
+                if time.monotonic() > deadline:
+                    raise RuntimeError("timed out")
+                executor.spin_once(timeout_sec=0.05)
+
+        try:
+            spin_until(lambda: cmd.get_subscription_count() >= 1
+                       and tile.get_subscription_count() >= 1)
+            cmd.publish(Int32(data=1))
+            spin_until(lambda: len(predicted) >= 1)
+            ready = time.perf_counter() - started
+            durations = []
+            rng = np.random.default_rng(1)
+            for _ in range(args.steps + 3):
+                target = len(beliefs) + 1
+                begin = time.perf_counter()
+                cmd.publish(Int32(data=int(rng.integers(-2, 3))))
+                tile.publish(String(data=("dark", "bright")[int(rng.integers(0, 2))]))
+                spin_until(lambda t=target: len(beliefs) >= t)
+                durations.append(beliefs[-1] - begin)
+            durations = np.array(durations[3:])
+            if sizes != {args.cells}:
+                raise RuntimeError(f"beliefs of {sizes} values, expected {args.cells}")
+            estimator_rss = resident_mib(estimator.pid)
+            bare_rss = resident_mib(bare.pid)
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+            stop(estimator)
+            stop(bare)
+            rclpy.try_shutdown()
+    arrays_mib = 3 * args.cells * 8 / 2**20
+    print(f"Large world: N = {args.cells:,} cells, {args.steps} full steps "
+          f"(predict + correct + both beliefs published and received); "
+          f"estimator up and answering after {ready:.1f} s")
+    print(table(
+        ["figure", "value"],
+        [["full step, median", f"{np.median(durations) * 1e3:.1f} ms "
+          f"({1 / np.median(durations):.1f} steps/s)"],
+         ["full step, p10..p90", f"{np.percentile(durations, 10) * 1e3:.1f}.."
+          f"{np.percentile(durations, 90) * 1e3:.1f} ms"],
+         ["estimator RSS", f"{estimator_rss:.0f} MiB"],
+         ["bare rclpy node RSS + 3 x N x 8 B", f"{bare_rss:.0f} + {arrays_mib:.0f} = "
+          f"{bare_rss + arrays_mib:.0f} MiB"],
+         ["ratio", f"{estimator_rss / (bare_rss + arrays_mib):.2f}"]]))
+
+
+def subprocess_estimator(world: Path, env: dict):
+    import subprocess
+
+    return subprocess.Popen(
+        [sys.executable, "-m", "estimation_nodes.nodes.estimator", "--ros-args",
+         "-p", f"world_file:={world}", "-p", "history_depth:=1", "--log-level", "warn"],
+        env=env)
+
+
+if __name__ == "__main__":
+    main()
