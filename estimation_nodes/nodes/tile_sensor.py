@@ -10,6 +10,7 @@ which is how the textbook's examples are replayed.
 
 from __future__ import annotations
 
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -42,7 +43,41 @@ SENSOR_SPECS = WORLD_SPECS + (
     ParamSpec("scripted_measurements", UNSET,
               "Scripted mode: position measurements to publish, one per command.",
               read_only=True, type_name="double_array"),
+    ParamSpec("hold_until_matched", True,
+              "Keep readings (up to 1000 per topic) while no subscriber is matched on their "
+              "topic and send them, in order, once one is: a sensor (re)started before the "
+              "estimator has discovered it loses nothing.", read_only=True),
 )
+
+#: How often held readings are checked for a matched subscriber.
+FLUSH_PERIOD_S = 0.02
+#: Readings kept per topic while nobody listens; the oldest go first beyond that.
+HOLD_LIMIT = 1000
+
+
+class HeldPublisher:
+    """A publisher that keeps its messages while no subscription is matched."""
+
+    def __init__(self, publisher, hold: bool) -> None:
+        self._publisher = publisher
+        self._hold = hold
+        self._held: deque = deque(maxlen=HOLD_LIMIT)
+
+    @property
+    def held(self) -> int:
+        return len(self._held)
+
+    def publish(self, msg) -> None:
+        if self._hold and (self._held or self._publisher.get_subscription_count() == 0):
+            self._held.append(msg)
+            return
+        self._publisher.publish(msg)
+
+    def flush(self) -> None:
+        """Send what was held, in order, once a subscription is matched."""
+        if self._held and self._publisher.get_subscription_count() > 0:
+            while self._held:
+                self._publisher.publish(self._held.popleft())
 
 
 class TileSensor(Node):
@@ -74,9 +109,12 @@ class TileSensor(Node):
 
         qos = latched_qos(100)
         self._truth_pub = self.create_publisher(Int64, "true_position", qos)
-        self._tile_pub = self.create_publisher(String, "tile_observation", INPUT_QOS)
-        self._measurement_pub = self.create_publisher(Float64, "position_measurement",
-                                                      INPUT_QOS)
+        hold = bool(values["hold_until_matched"])
+        self._tile_pub = HeldPublisher(
+            self.create_publisher(String, "tile_observation", INPUT_QOS), hold)
+        self._measurement_pub = HeldPublisher(
+            self.create_publisher(Float64, "position_measurement", INPUT_QOS), hold)
+        self.create_timer(FLUSH_PERIOD_S, self._flush_held)
         self.create_subscription(Int32, "motion_cmd", self._on_motion_cmd, INPUT_QOS)
         mode = "scripted" if self._scripted else f"random (seed {seed})"
         self.get_logger().info(f"ready: {self._model.size} cells, start cell "
@@ -104,6 +142,10 @@ class TileSensor(Node):
             self._tile_pub.publish(String(data=observation))
         if measurement is not None:
             self._measurement_pub.publish(Float64(data=measurement))
+
+    def _flush_held(self) -> None:
+        for publisher in (self._tile_pub, self._measurement_pub):
+            publisher.flush()
 
     def _scripted_item(self, script: list, step: int) -> Any:
         """The script's entry for this step; None once the script (or an empty one) ends."""

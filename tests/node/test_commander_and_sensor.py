@@ -84,3 +84,21 @@ def test_seeded_sensor_is_reproducible_and_follows_the_models(context, executor,
 def test_sensor_rejects_unknown_scripted_class(context):
     with pytest.raises(ConfigurationError, match="unknown tile class 'grey'"):
         TileSensor(context=context, parameter_overrides=params(scripted_observations=["grey"]))
+
+
+def test_sensor_holds_readings_until_someone_listens(context, executor, collector_factory):
+    sensor = TileSensor(context=context, parameter_overrides=params(
+        scripted_observations=["bright", "dark", "dark"]))
+    executor.add_node(sensor)
+    driver = collector_factory({"true_position": Int64}, name="driver")
+    pub = driver.node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+    assert spin_until(executor, lambda: pub.get_subscription_count() == 1, 10.0)
+    for _ in range(3):
+        pub.publish(Int32(data=1))
+    assert spin_until(executor, lambda: driver.count("true_position") == 3, 10.0)
+    assert sensor._tile_pub.held == 3   # nobody subscribed to tile_observation yet
+    late = collector_factory({"tile_observation": (String, INPUT_QOS)}, name="late")
+    assert spin_until(executor, lambda: late.count("tile_observation") == 3, 10.0)
+    assert [m.data for m in late.messages["tile_observation"]] == ["bright", "dark", "dark"]
+    assert sensor._tile_pub.held == 0
+    sensor.destroy_node()
