@@ -78,7 +78,7 @@ def test_seeded_random_run_localizes_and_matches_offline_filter(
                               "tile_observation": (String, INPUT_QOS)})
     started = start_graph(processes, scenario, "-p", "rate_hz:=20.0")
     wait_for_commander(executor, started)
-    steps = yaml.safe_load(scenario.read_text())["/motion_commander"]["ros__parameters"][
+    steps = yaml.safe_load(scenario.read_text())["/**/motion_commander"]["ros__parameters"][
         "max_commands"]
     assert spin_until(executor, lambda: seen.count("belief") >= steps
                       and seen.count("true_position") >= steps, 20.0)
@@ -90,7 +90,7 @@ def test_seeded_random_run_localizes_and_matches_offline_filter(
           f"after step 10 ({sum(hits)} of {len(hits)} in all)")
     assert sum(converged) / len(converged) >= 0.7
     # The graph computed exactly what the core computes over the same observations.
-    params = yaml.safe_load(scenario.read_text())["/estimator"]["ros__parameters"]
+    params = yaml.safe_load(scenario.read_text())["/**/estimator"]["ros__parameters"]
     model = HistogramModel.from_lists(params["world"], params["classes"],
                                       params["sensor_model"], params["motion_kernel"])
     belief = histogram.uniform(model.size)
@@ -177,3 +177,30 @@ def test_ros_processes_confined_to_localhost_by_demo(ros_env):
         text=True, timeout=120)
     assert result.returncode == 0, result.stderr
     assert "ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST" in result.stdout
+
+
+def test_two_robots_in_namespaces_do_not_mix(processes, executor, collector_factory):
+    from tests.graph.graph_tools import node_command
+
+    seen = collector_factory({"/robot1/belief": Float64MultiArray,
+                              "/robot2/belief": Float64MultiArray,
+                              "/belief": Float64MultiArray})
+    commanders = []
+    for robot, scenario in (("robot1", "example_6_14.yaml"), ("robot2", "localization.yaml")):
+        for name in ("estimator", "tile_sensor", "motion_commander"):
+            extra = ["-r", f"__ns:=/{robot}"]
+            if name == "motion_commander":
+                extra += ["-p", "start_delay:=0.5", "-p", "exit_when_done:=true",
+                          "-p", "max_commands:=3", "-p", "rate_hz:=5.0"]
+            process = processes(node_command(name, SCENARIOS / scenario, *extra))
+            if name == "motion_commander":
+                commanders.append(process)
+    for commander in commanders:
+        wait_for_commander(executor, {"motion_commander": commander})
+    assert spin_until(executor, lambda: seen.count("/robot1/belief") >= 3
+                      and seen.count("/robot2/belief") >= 3, 20.0)
+    assert seen.count("/belief") == 0
+    assert {len(m.data) for m in seen.messages["/robot1/belief"]} == {5}
+    assert {len(m.data) for m in seen.messages["/robot2/belief"]} == {20}
+    np.testing.assert_allclose(beliefs(seen.messages["/robot1/belief"])[-1],
+                               [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
