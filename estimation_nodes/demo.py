@@ -16,12 +16,11 @@ import subprocess
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from estimation_nodes.params_files import check_params_file
+from estimation_nodes.recording import RecordingError
+from estimation_nodes.run_record import RunRecord, summarize
 
 NODE_MODULES = {
     "estimator": "estimation_nodes.nodes.estimator",
@@ -30,7 +29,8 @@ NODE_MODULES = {
 }
 #: Start order: the commander last, so it finds the others soonest.
 START_ORDER = ("estimator", "tile_sensor", "motion_commander")
-BARS = " ▁▂▃▄▅▆▇█"
+#: Subscribers the commander waits for: the sensor, the estimator and this script's monitor.
+REQUIRED_SUBSCRIBERS = 3
 
 
 class DemoError(Exception):
@@ -92,6 +92,10 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--in-process", action="store_true",
                         help="run the three nodes in this process instead of three")
     parser.add_argument("--quiet", action="store_true", help="print only the summary")
+    parser.add_argument("--record", type=Path, metavar="FILE.mcap",
+                        help="write every topic of the run to a ROS 2 MCAP file")
+    parser.add_argument("--plot", type=Path, metavar="FILE.png",
+                        help="render the run as a PNG when it is over")
     args = parser.parse_args(argv)
     if args.settle < 0 or args.linger < 0 or args.timeout <= 0:
         parser.error("--settle and --linger must be >= 0, --timeout > 0")
@@ -100,7 +104,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
 
 def commander_overrides(settle: float, exit_when_done: bool) -> list[str]:
     return ["-p", f"exit_when_done:={str(exit_when_done).lower()}",
-            "-p", f"start_delay:={settle}"]
+            "-p", f"start_delay:={settle}",
+            "-p", f"required_subscribers:={REQUIRED_SUBSCRIBERS}"]
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -114,108 +119,34 @@ def main(argv: Sequence[str] | None = None) -> None:
     os.environ.update(env)
     print(f"estimation_demo: parameters from {params}")
     runner = run_in_process if args.in_process else run_processes
-    sys.exit(runner(params, args))
+    try:
+        code, record = runner(params, args)
+    except RecordingError as error:
+        print(f"estimation_demo: {error}", file=sys.stderr)
+        sys.exit(2)
+    print(summarize(record))
+    if args.record:
+        print(f"estimation_demo: recorded to {args.record}")
+    if args.plot:
+        from estimation_nodes.plot import render
+
+        print(f"estimation_demo: plot written to {render(record, args.plot)}")
+    sys.exit(code)
 
 
-# --- watching the run ------------------------------------------------------------------------
+def make_monitor(params: Path, args: argparse.Namespace):
+    """The monitor node, writing an MCAP file when --record asks for one."""
+    from estimation_nodes.monitor import RunMonitor
+    from estimation_nodes.recording import TOPIC_TYPES, McapRunWriter
 
-
-@dataclass
-class RunRecord:
-    """What the monitor saw, one entry per message, in arrival order per topic."""
-
-    predicted: list[np.ndarray] = field(default_factory=list)
-    corrected: list[np.ndarray] = field(default_factory=list)
-    kalman: list[tuple[float, float]] = field(default_factory=list)
-    truth: list[int] = field(default_factory=list)
-
-
-def bars(belief: np.ndarray) -> str:
-    """One block character per cell, height by probability relative to the largest."""
-    if belief.size > 60:
-        top = np.argsort(belief)[::-1][:3]
-        return "top cells " + ", ".join(f"{i}:{belief[i]:.3f}" for i in top)
-    scaled = belief / max(float(belief.max()), 1e-300) * (len(BARS) - 1)
-    blocks = "".join(BARS[int(round(v))] for v in scaled)
-    if belief.size <= 12:
-        return f"|{blocks}|  [" + " ".join(f"{v:.6f}" for v in belief) + "]"
-    return f"|{blocks}|"
-
-
-def make_monitor(record: RunRecord, quiet: bool, **node_kwargs):
-    """A node that records and prints every estimate (imports rclpy lazily)."""
-    from geometry_msgs.msg import PoseWithCovariance
-    from rclpy.node import Node
-    from std_msgs.msg import Float64MultiArray, Int64
-
-    from estimation_nodes.nodes.ros_common import latched_qos
-
-    def say(text: str) -> None:
-        if not quiet:
-            print(text, flush=True)
-
-    def cells_of(belief: np.ndarray) -> int:
-        return belief.size
-
-    def truth_note(step: int, size: int) -> str:
-        if step < len(record.truth):
-            return f"(true cell {record.truth[step] % size})"
-        return ""
-
-    def on_predicted(msg) -> None:
-        belief = np.frombuffer(msg.data, dtype=np.float64).copy()
-        record.predicted.append(belief)
-        say(f"step {len(record.predicted):3d}  predicted  {bars(belief)}")
-
-    def on_corrected(msg) -> None:
-        belief = np.frombuffer(msg.data, dtype=np.float64).copy()
-        record.corrected.append(belief)
-        step = len(record.corrected) - 1
-        say(f"step {step + 1:3d}  corrected  {bars(belief)}  most likely cell "
-            f"{int(np.argmax(belief))} {truth_note(step, cells_of(belief))}")
-
-    def on_kalman(msg) -> None:
-        x, var = msg.pose.position.x, msg.covariance[0]
-        record.kalman.append((x, var))
-        step = len(record.kalman) - 1
-        truth = f"(true position {record.truth[step]})" if step < len(record.truth) else ""
-        say(f"step {step + 1:3d}  kalman     x = {x:.6f}  var = {var:.6f}  "
-            f"std = {np.sqrt(var):.6f}  {truth}")
-
-    def on_truth(msg) -> None:
-        record.truth.append(msg.data)
-
-    node = Node("estimation_demo_monitor", **node_kwargs)
-    qos = latched_qos(1000)
-    node.create_subscription(Int64, "true_position", on_truth, qos)
-    node.create_subscription(Float64MultiArray, "belief_predicted", on_predicted, qos)
-    node.create_subscription(Float64MultiArray, "belief", on_corrected, qos)
-    node.create_subscription(PoseWithCovariance, "kalman_estimate", on_kalman, qos)
-    return node
-
-
-def summarize(record: RunRecord) -> str:
-    lines = ["", "summary:",
-             f"  predictions {len(record.predicted)}, histogram corrections "
-             f"{len(record.corrected)}, Kalman corrections {len(record.kalman)}"]
-    if record.corrected:
-        final = record.corrected[-1]
-        lines.append(f"  final belief: most likely cell {int(np.argmax(final))} "
-                     f"(p = {final.max():.6f})")
-        steps = min(len(record.corrected), len(record.truth))
-        if steps:
-            hits = [int(np.argmax(record.corrected[i])) == record.truth[i] % final.size
-                    for i in range(steps)]
-            lines.append(f"  most likely cell == true cell in {sum(hits)} of {steps} steps")
-    if record.kalman:
-        x, var = record.kalman[-1]
-        lines.append(f"  final Kalman estimate {x:.6f} +- {np.sqrt(var):.6f} (1 std)")
-        steps = min(len(record.kalman), len(record.truth))
-        if steps:
-            errors = [record.kalman[i][0] - record.truth[i] for i in range(steps)]
-            lines.append(f"  Kalman RMS error {np.sqrt(np.mean(np.square(errors))):.6f} cells "
-                         f"over {steps} steps")
-    return "\n".join(lines)
+    writer = None
+    if args.record:
+        metadata = {"parameters_yaml": params.read_text(encoding="utf-8"),
+                    "parameters_file": str(params)}
+        # Topics as the nodes resolve them: this script runs them in the root namespace.
+        writer = McapRunWriter(args.record, {f"/{t}": n for t, n in TOPIC_TYPES.items()},
+                               metadata)
+    return RunMonitor(quiet=args.quiet, writer=writer), writer
 
 
 # --- running the graph -----------------------------------------------------------------------
@@ -242,27 +173,30 @@ def stop_process(process: subprocess.Popen, grace: float = 5.0) -> int:
     return process.returncode
 
 
-def run_processes(params: Path, args: argparse.Namespace) -> int:
+def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecord]:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
     processes: dict[str, subprocess.Popen] = {}
-    record = RunRecord()
     rclpy.init()
     executor = SingleThreadedExecutor()
-    monitor = None
+    monitor = writer = None
     code = 0
     try:
-        monitor = make_monitor(record, args.quiet)
+        monitor, writer = make_monitor(params, args)
         executor.add_node(monitor)
+        deadline = time.monotonic() + args.timeout
         for name in START_ORDER:
+            if name == "motion_commander":
+                # The monitor must hear the sensor's and the estimator's first messages.
+                spin_until(executor, lambda: monitor.publishers_matched(("motion_cmd",)),
+                           deadline)
             command = [sys.executable, "-m", NODE_MODULES[name],
                        "--ros-args", "--params-file", str(params)]
             if name == "motion_commander":
                 command += commander_overrides(args.settle, exit_when_done=True)
             processes[name] = subprocess.Popen(command)
         commander = processes["motion_commander"]
-        deadline = time.monotonic() + args.timeout
         finished = spin_until(executor, lambda: any(p.poll() is not None
                                                     for p in processes.values()), deadline)
         failed = {n: p.returncode for n, p in processes.items()
@@ -284,13 +218,14 @@ def run_processes(params: Path, args: argparse.Namespace) -> int:
                 stop_process(processes[name])
         if monitor is not None:
             monitor.destroy_node()
+        if writer is not None:
+            writer.close()
         executor.shutdown()
         rclpy.try_shutdown()
-    print(summarize(record))
-    return code
+    return code, monitor.record if monitor is not None else RunRecord()
 
 
-def run_in_process(params: Path, args: argparse.Namespace) -> int:
+def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunRecord]:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
@@ -299,15 +234,16 @@ def run_in_process(params: Path, args: argparse.Namespace) -> int:
     from estimation_nodes.nodes.tile_sensor import TileSensor
     from estimation_nodes.nodes.ros_common import ConfigurationError
 
-    record = RunRecord()
     ros_args = ["--ros-args", "--params-file", str(params),
                 *commander_overrides(args.settle, exit_when_done=False)]
     rclpy.init(args=["estimation_demo", *ros_args])
     executor = SingleThreadedExecutor()
     nodes = []
+    writer = None
     code = 0
     try:
-        nodes.append(make_monitor(record, args.quiet))
+        monitor, writer = make_monitor(params, args)
+        nodes.append(monitor)
         for node_class in (Estimator, TileSensor, MotionCommander):
             nodes.append(node_class())
         for node in nodes:
@@ -328,10 +264,11 @@ def run_in_process(params: Path, args: argparse.Namespace) -> int:
     finally:
         for node in nodes:
             node.destroy_node()
+        if writer is not None:
+            writer.close()
         executor.shutdown()
         rclpy.try_shutdown()
-    print(summarize(record))
-    return code
+    return code, nodes[0].record if nodes else RunRecord()
 
 
 if __name__ == "__main__":

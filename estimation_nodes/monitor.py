@@ -1,0 +1,121 @@
+"""The demo's observer: takes every topic of the run raw, records, prints, optionally writes MCAP.
+
+One raw subscription per topic: the CDR bytes go unchanged into the MCAP file
+(when recording) and are deserialized once for the RunRecord and the display.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from collections.abc import Callable
+
+import numpy as np
+from rclpy.node import Node
+from rclpy.serialization import deserialize_message
+
+from estimation_nodes.nodes.ros_common import INPUT_QOS, latched_qos
+from estimation_nodes.recording import TOPIC_TYPES, McapRunWriter
+from estimation_nodes.run_record import RunRecord
+
+BARS = " ▁▂▃▄▅▆▇█"
+INPUTS = ("motion_cmd", "tile_observation", "position_measurement")
+
+
+def message_class(type_name: str) -> type:
+    """The Python class of a ROS type named like 'std_msgs/msg/Int32'."""
+    package, interface, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{package}.{interface}"), name)
+
+
+def bars(belief: np.ndarray) -> str:
+    """One block character per cell, height by probability relative to the largest."""
+    if belief.size > 60:
+        top = np.argsort(belief)[::-1][:3]
+        return "top cells " + ", ".join(f"{i}:{belief[i]:.3f}" for i in top)
+    scaled = belief / max(float(belief.max()), 1e-300) * (len(BARS) - 1)
+    blocks = "".join(BARS[int(round(v))] for v in scaled)
+    if belief.size <= 12:
+        return f"|{blocks}|  [" + " ".join(f"{v:.6f}" for v in belief) + "]"
+    return f"|{blocks}|"
+
+
+class RunMonitor(Node):
+    """Subscribes to every topic of the run; keeps a RunRecord; prints each estimate."""
+
+    def __init__(self, quiet: bool = False, writer: McapRunWriter | None = None,
+                 **kwargs) -> None:
+        super().__init__("estimation_demo_monitor", **kwargs)
+        self.record = RunRecord()
+        self._quiet = quiet
+        self._writer = writer
+        self._types = {topic: message_class(name) for topic, name in TOPIC_TYPES.items()}
+        handlers: dict[str, Callable[[object], None]] = {
+            "true_position": lambda msg: self.record.truth.append(msg.data),
+            "belief_predicted": self._on_predicted,
+            "belief": self._on_corrected,
+            "kalman_estimate": self._on_kalman,
+            "kalman_estimate_stamped": lambda msg: None,
+        }
+        for topic in INPUTS:
+            handlers[topic] = lambda msg, t=topic: self.record.add_event(t, msg.data)
+        self._subscriptions_by_topic = {}
+        for topic, msg_type in self._types.items():
+            qos = INPUT_QOS if topic in INPUTS else latched_qos(1000)
+            self._subscriptions_by_topic[topic] = self.create_subscription(
+                msg_type, topic, self._raw_handler(topic, handlers[topic]), qos, raw=True)
+
+    def publishers_matched(self, except_topics: tuple[str, ...] = ()) -> bool:
+        """Whether every topic (but those named) has a matched publisher.
+
+        Volatile readings published before the match would be lost to the monitor.
+        """
+        return all(sub.get_publisher_count() >= 1
+                   for topic, sub in self._subscriptions_by_topic.items()
+                   if topic not in except_topics)
+
+    @property
+    def resolved_topics(self) -> dict[str, str]:
+        """Each topic's type under the name it resolves to in this node's namespace."""
+        return {self.resolve_topic_name(t): name for t, name in TOPIC_TYPES.items()}
+
+    def _raw_handler(self, topic: str, handle: Callable[[object], None]):
+        msg_type = self._types[topic]
+        resolved = self.resolve_topic_name(topic)
+
+        def on_raw(data: bytes, info: dict) -> None:
+            if self._writer is not None:
+                self._writer.write(resolved, data, time.time_ns(),
+                                   info.get("source_timestamp") or time.time_ns())
+            handle(deserialize_message(data, msg_type))
+
+        return on_raw
+
+    def _say(self, text: str) -> None:
+        if not self._quiet:
+            print(text, flush=True)
+
+    def _truth_note(self, step: int, size: int) -> str:
+        truth = self.record.truth
+        return f"(true cell {truth[step] % size})" if step < len(truth) else ""
+
+    def _on_predicted(self, msg) -> None:
+        belief = np.frombuffer(msg.data, dtype=np.float64).copy()
+        self.record.predicted.append(belief)
+        self._say(f"step {len(self.record.predicted):3d}  predicted  {bars(belief)}")
+
+    def _on_corrected(self, msg) -> None:
+        belief = np.frombuffer(msg.data, dtype=np.float64).copy()
+        self.record.corrected.append(belief)
+        step = len(self.record.corrected) - 1
+        self._say(f"step {step + 1:3d}  corrected  {bars(belief)}  most likely cell "
+                  f"{int(np.argmax(belief))} {self._truth_note(step, belief.size)}")
+
+    def _on_kalman(self, msg) -> None:
+        x, var = msg.pose.position.x, msg.covariance[0]
+        self.record.kalman.append((x, var))
+        step = len(self.record.kalman) - 1
+        truth = self.record.truth
+        note = f"(true position {truth[step]})" if step < len(truth) else ""
+        self._say(f"step {step + 1:3d}  kalman     x = {x:.6f}  var = {var:.6f}  "
+                  f"std = {np.sqrt(var):.6f}  {note}")

@@ -1,0 +1,121 @@
+"""Render a run as one PNG: histogram beliefs per step and the Kalman estimate over time.
+
+    estimation_plot RUN.mcap --output run.png
+
+Top: up to twelve steps (evenly spread over the run), each a panel with the
+predicted (light) and corrected (dark) belief side by side over the cells,
+as the textbook's figures of Examples 6.11 to 6.14 show them, and the true
+cell marked. Bottom: the Kalman estimate with its 2-sigma band, the
+measurements and the truth. Needs matplotlib (the ``plot`` extra).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from estimation_nodes.run_record import RunRecord
+
+#: Pixel size of every picture: 16 x 12 inches at 100 dpi.
+FIGURE_INCHES = (16.0, 12.0)
+DPI = 100
+MAX_PANELS = 12
+
+
+def _chosen_steps(count: int) -> list[int]:
+    if count <= MAX_PANELS:
+        return list(range(count))
+    return sorted({int(round(i)) for i in np.linspace(0, count - 1, MAX_PANELS)})
+
+
+def _belief_panel(ax, record: RunRecord, step: int) -> None:
+    cells = np.arange(record.cells)
+    width = 0.4
+    if step < len(record.predicted):
+        ax.bar(cells - width / 2, record.predicted[step], width, color="#9ecae1",
+               label="predicted")
+    if step < len(record.corrected):
+        ax.bar(cells + width / 2, record.corrected[step], width, color="#08519c",
+               label="corrected")
+    if step < len(record.truth):
+        true_cell = record.truth[step] % record.cells
+        ax.axvline(true_cell, color="#d62728", linewidth=1.5, linestyle="--", label="true cell")
+    ax.set_title(f"step {step + 1}", fontsize=10)
+    ax.set_ylim(0.0, 1.0)
+    if record.cells <= 25:
+        ax.set_xticks(cells)
+    ax.tick_params(labelsize=8)
+
+
+def _kalman_panel(ax, record: RunRecord) -> None:
+    if not record.kalman:
+        ax.text(0.5, 0.5, "no Kalman estimates in this run", ha="center", va="center",
+                transform=ax.transAxes)
+        return
+    steps = np.arange(1, len(record.kalman) + 1)
+    x = np.array([k[0] for k in record.kalman])
+    sigma = np.sqrt([k[1] for k in record.kalman])
+    ax.fill_between(steps, x - 2 * sigma, x + 2 * sigma, color="#c6dbef",
+                    label="estimate +- 2 sigma")
+    ax.plot(steps, x, color="#08519c", marker="o", label="Kalman estimate")
+    if record.measurements:
+        count = min(len(record.measurements), len(steps))
+        ax.plot(steps[:count], record.measurements[:count], "x", color="#ff7f0e",
+                label="measurement")
+    if record.truth:
+        count = min(len(record.truth), len(steps))
+        ax.plot(steps[:count], record.truth[:count], color="#d62728", linestyle="--",
+                label="truth")
+    ax.set_xlabel("step")
+    ax.set_ylabel("position (cells, unwrapped)")
+    ax.legend(loc="upper left", fontsize=9)
+    ax.grid(alpha=0.3)
+
+
+def render(record: RunRecord, output: Path) -> Path:
+    """Write the picture of ``record`` to ``output`` (PNG, 1600 x 1200 pixels)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure = plt.figure(figsize=FIGURE_INCHES, dpi=DPI)
+    grid = figure.add_gridspec(4, 4, height_ratios=[1, 1, 1, 1.6], hspace=0.45, wspace=0.25)
+    steps = _chosen_steps(max(len(record.predicted), len(record.corrected)))
+    for panel, step in enumerate(steps):
+        _belief_panel(figure.add_subplot(grid[panel // 4, panel % 4]), record, step)
+    if not steps:
+        ax = figure.add_subplot(grid[0, :])
+        ax.text(0.5, 0.5, "no histogram beliefs in this run", ha="center", va="center")
+        ax.axis("off")
+    elif figure.axes:
+        figure.axes[0].legend(fontsize=8, loc="upper right")
+    _kalman_panel(figure.add_subplot(grid[3, :]), record)
+    figure.suptitle("estimation_nodes: histogram belief per step (top) and Kalman estimate "
+                    "(bottom)", fontsize=13)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    figure.savefig(output, dpi=DPI)
+    plt.close(figure)
+    return output
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog="estimation_plot", description=__doc__.split("\n")[0])
+    parser.add_argument("recording", type=Path, help="an MCAP file from estimation_demo --record")
+    parser.add_argument("--output", "-o", type=Path, required=True, help="PNG file to write")
+    args = parser.parse_args(argv)
+    from estimation_nodes.recording import RecordingError, read_recording
+
+    try:
+        record = read_recording(args.recording).record
+    except RecordingError as error:
+        print(f"estimation_plot: {error}", file=sys.stderr)
+        sys.exit(2)
+    print(f"estimation_plot: wrote {render(record, args.output)}")
+
+
+if __name__ == "__main__":
+    main()

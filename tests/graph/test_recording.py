@@ -1,0 +1,114 @@
+"""Record a run to MCAP, read it with the mcap tools, replay it offline, plot it."""
+
+import subprocess
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+from tests.graph.graph_tools import executable
+from tests.unit.test_plot import png_size
+
+EXPECTED_TOPICS = {
+    "/motion_cmd": "std_msgs/msg/Int32",
+    "/tile_observation": "std_msgs/msg/String",
+    "/position_measurement": "std_msgs/msg/Float64",
+    "/true_position": "std_msgs/msg/Int64",
+    "/belief_predicted": "std_msgs/msg/Float64MultiArray",
+    "/belief": "std_msgs/msg/Float64MultiArray",
+    "/kalman_estimate": "geometry_msgs/msg/PoseWithCovariance",
+    "/kalman_estimate_stamped": "geometry_msgs/msg/PoseWithCovarianceStamped",
+}
+
+
+def record_run(ros_env, tmp_path, scenario, *extra):
+    mcap_path, png_path = tmp_path / f"{scenario}.mcap", tmp_path / f"{scenario}.png"
+    result = subprocess.run(
+        [executable("estimation_demo"), "--scenario", scenario, "--settle", "0.5",
+         "--linger", "0.5", "--quiet", "--record", str(mcap_path), "--plot", str(png_path),
+         *extra], env=ros_env, capture_output=True, text=True, timeout=180)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return mcap_path, png_path
+
+
+def decoded_by_topic(path):
+    by_topic, schemas = {}, {}
+    with path.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        header = reader.get_header()
+        for schema, channel, _message, decoded in reader.iter_decoded_messages():
+            by_topic.setdefault(channel.topic, []).append(decoded)
+            schemas[channel.topic] = (schema.name, schema.encoding, channel.message_encoding)
+    return header, by_topic, schemas
+
+
+def test_example_6_14_recording_has_every_topic_and_replays_exactly(ros_env, tmp_path):
+    mcap_path, png_path = record_run(ros_env, tmp_path, "example_6_14")
+    header, by_topic, schemas = decoded_by_topic(mcap_path)
+    assert header.profile == "ros2"
+    assert {t: s[0] for t, s in schemas.items()} == {
+        t: n for t, n in EXPECTED_TOPICS.items()
+        if t not in ("/position_measurement", "/kalman_estimate", "/kalman_estimate_stamped")}
+    assert all(s[1:] == ("ros2msg", "cdr") for s in schemas.values())
+    counts = {t: len(m) for t, m in by_topic.items()}
+    assert counts == {"/motion_cmd": 3, "/tile_observation": 3, "/true_position": 3,
+                      "/belief_predicted": 3, "/belief": 3}
+    assert [m.data for m in by_topic["/tile_observation"]] == ["bright", "dark", "dark"]
+    np.testing.assert_allclose(by_topic["/belief"][-1].data,
+                               [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
+    assert by_topic["/belief"][0].layout.dim[0].label == "cells"
+
+    replay = subprocess.run([executable("estimation_replay"), str(mcap_path)], env=ros_env,
+                            capture_output=True, text=True, timeout=60)
+    assert replay.returncode == 0, replay.stdout + replay.stderr
+    assert "online vs offline to 1e-09: EQUAL" in replay.stdout
+    assert png_size(png_path)[:2] == (1600, 1200)
+
+
+def test_seeded_random_run_records_all_topics_and_replays_exactly(ros_env, tmp_path):
+    mcap_path, _ = record_run(ros_env, tmp_path, "localization", "--settle", "0.5")
+    _, by_topic, schemas = decoded_by_topic(mcap_path)
+    assert {t: s[0] for t, s in schemas.items()} == EXPECTED_TOPICS
+    assert {len(m) for m in by_topic.values()} == {40}
+    replay = subprocess.run([executable("estimation_replay"), str(mcap_path)], env=ros_env,
+                            capture_output=True, text=True, timeout=60)
+    assert replay.returncode == 0, replay.stdout + replay.stderr
+    assert "belief: 40 estimates compared, largest difference 0" in replay.stdout
+
+    plot = subprocess.run([executable("estimation_plot"), str(mcap_path), "-o",
+                           str(tmp_path / "from_recording.png")], env=ros_env,
+                          capture_output=True, text=True, timeout=60)
+    assert plot.returncode == 0, plot.stderr
+    assert png_size(tmp_path / "from_recording.png")[:2] == (1600, 1200)
+
+
+def test_replay_shows_where_other_parameters_differ(ros_env, tmp_path):
+    mcap_path, _ = record_run(ros_env, tmp_path, "example_6_14")
+    other = tmp_path / "other.yaml"
+    other.write_text("/**/estimator:\n  ros__parameters:\n    motion_kernel: [0.2, 0.6, 0.2]\n")
+    replay = subprocess.run([executable("estimation_replay"), str(mcap_path), "--params-file",
+                             str(other)], env=ros_env, capture_output=True, text=True,
+                            timeout=60)
+    assert replay.returncode == 1
+    assert "belief_predicted #2: |online - offline|" in replay.stdout
+    assert "DIFFERENT" in replay.stdout
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--record", "/nonexistent-dir/run.mcap"], "does not exist"),
+    (["--record", "run.bag"], "should end in .mcap"),
+])
+def test_demo_rejects_bad_record_paths(ros_env, tmp_path, args, message):
+    result = subprocess.run([executable("estimation_demo"), "--scenario", "example_6_14",
+                             "--in-process", *args], env=ros_env, capture_output=True,
+                            text=True, timeout=60, cwd=tmp_path)
+    assert result.returncode == 2 and message in result.stderr, result.stderr
+
+
+def test_replay_rejects_a_file_that_is_not_mcap(ros_env, tmp_path):
+    bogus = tmp_path / "bogus.mcap"
+    bogus.write_bytes(b"not an mcap file at all")
+    result = subprocess.run([executable("estimation_replay"), str(bogus)], env=ros_env,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and "not a readable MCAP recording" in result.stderr
