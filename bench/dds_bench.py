@@ -15,8 +15,6 @@ events per second until every answer is back; a lost message fails the run.
 from __future__ import annotations
 
 import argparse
-import os
-import signal
 import subprocess
 import sys
 import time
@@ -25,7 +23,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
+
+from estimation_nodes.demo import stop_process  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
 WINDOW = 100
@@ -38,15 +39,6 @@ def start(kind: str, env: dict) -> subprocess.Popen:
     else:
         command = [sys.executable, str(BENCH / "relay_node.py")]
     return subprocess.Popen(command, env=env)
-
-
-def stop(process: subprocess.Popen) -> None:
-    process.send_signal(signal.SIGINT)
-    try:
-        process.wait(timeout=10)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        process.wait()
 
 
 class Driver:
@@ -139,7 +131,7 @@ def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float]:
         return latencies, rate
     finally:
         driver.close()
-        stop(process)
+        stop_process(process)
 
 
 def main() -> None:
@@ -147,10 +139,7 @@ def main() -> None:
     parser.add_argument("--events", type=int, default=3000)
     parser.add_argument("--rounds", type=int, default=3)
     args = parser.parse_args()
-    env = dict(os.environ)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    env.setdefault("ROS_DOMAIN_ID", "77")
-    os.environ.update(env)
+    env = confine_ros(77)
     import rclpy
 
     rclpy.init()

@@ -13,7 +13,6 @@ that of a bare rclpy node (bench/relay_node.py, idle) plus 3 x N x 8 bytes.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import tempfile
 import time
@@ -22,8 +21,11 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from dds_bench import start, stop  # noqa: E402
+from dds_bench import start  # noqa: E402
+from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
+
+from estimation_nodes.demo import stop_process  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
 
@@ -48,10 +50,7 @@ def main() -> None:
     parser.add_argument("--cells", type=int, default=1_000_000)
     parser.add_argument("--steps", type=int, default=30)
     args = parser.parse_args()
-    env = dict(os.environ)
-    env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-    env.setdefault("ROS_DOMAIN_ID", "78")
-    os.environ.update(env)
+    env = confine_ros(78)
 
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -114,8 +113,8 @@ def main() -> None:
         finally:
             executor.shutdown()
             node.destroy_node()
-            stop(estimator)
-            stop(bare)
+            stop_process(estimator)
+            stop_process(bare)
             rclpy.try_shutdown()
     arrays_mib = 3 * args.cells * 8 / 2**20
     print(f"Large world: N = {args.cells:,} cells, {args.steps} full steps "

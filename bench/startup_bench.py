@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from dds_bench import stop  # noqa: E402
+from estimation_nodes.demo import stop_process  # noqa: E402
 from timing import table  # noqa: E402
 
 PROFILE = Path(__file__).resolve().parent / "fastdds_discovery.xml"
@@ -72,7 +72,7 @@ def one_run() -> dict[str, float]:
             raise RuntimeError("no output within 30 s")
         marks["first output"] = outputs[0] - spawned
     finally:
-        stop(estimator)
+        stop_process(estimator)
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown()

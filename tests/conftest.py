@@ -8,7 +8,6 @@ domain_coordinator reserves for that test alone.
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 import time
 from collections import defaultdict
@@ -122,11 +121,7 @@ def processes(ros_env):
         return process
 
     yield start
+    from estimation_nodes.demo import stop_process
+
     for process in started:
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-            try:
-                process.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                process.kill()
-                process.wait()
+        stop_process(process, grace=10.0)
