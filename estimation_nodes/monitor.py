@@ -74,11 +74,6 @@ class RunMonitor(Node):
                    for topic, sub in self._subscriptions_by_topic.items()
                    if topic not in except_topics)
 
-    @property
-    def resolved_topics(self) -> dict[str, str]:
-        """Each topic's type under the name it resolves to in this node's namespace."""
-        return {self.resolve_topic_name(t): name for t, name in TOPIC_TYPES.items()}
-
     def _raw_handler(self, topic: str, handle: Callable[[object], None]):
         msg_type = self._types[topic]
         resolved = self.resolve_topic_name(topic)

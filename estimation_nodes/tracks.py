@@ -24,10 +24,6 @@ class HistogramTrack:
         self.belief: FloatArray = settings.initial_belief.copy()
         self.last_evidence = float("nan")
 
-    @property
-    def size(self) -> int:
-        return self._settings.histogram.size
-
     def reconfigure(self, settings: EstimatorSettings) -> bool:
         """Take new models; the belief restarts only when the world size or prior changed.
 

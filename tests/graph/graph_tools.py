@@ -1,6 +1,5 @@
 """Helpers for the graph tests: find executables as ros2 run does, start and watch the graph."""
 
-import time
 from pathlib import Path
 
 import numpy as np
@@ -55,8 +54,3 @@ def resident_kib(pid: int) -> int:
 def wait_seconds(executor, seconds: float) -> None:
     """Keep spinning (so subscriptions are served) for a while."""
     spin_until(executor, lambda: False, seconds)
-
-
-def stopwatch():
-    start = time.monotonic()
-    return lambda: time.monotonic() - start
