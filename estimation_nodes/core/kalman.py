@@ -12,7 +12,7 @@ Every function returns new values and leaves its inputs alone.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -122,7 +122,7 @@ def correct(
     PCt = P @ C.T
     innovation_cov = C @ PCt + R
     # S and P are symmetric, so K' = S^-1 (C P) and K = (S^-1 C P)'.
-    K: FloatArray = np.linalg.solve(innovation_cov, PCt.T).T
+    K = cast(FloatArray, np.linalg.solve(innovation_cov, PCt.T).T)
     x_new = x + K @ (z_vec - C @ x)
     I_KC = model.identity - K @ C
     P_new = _symmetric(I_KC @ P @ I_KC.T + K @ R @ K.T)
