@@ -204,3 +204,18 @@ def test_two_robots_in_namespaces_do_not_mix(processes, executor, collector_fact
     assert {len(m.data) for m in seen.messages["/robot2/belief"]} == {20}
     np.testing.assert_allclose(beliefs(seen.messages["/robot1/belief"])[-1],
                                [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
+
+
+@pytest.mark.parametrize("name", ["estimator", "tile_sensor", "motion_commander"])
+def test_ctrl_c_ends_a_node_cleanly(processes, executor, collector_factory, name):
+    from tests.graph.graph_tools import node_command
+
+    node = processes(node_command(name, SCENARIOS / "example_6_14.yaml"))
+    watcher = collector_factory({}, name="watcher")
+    # Up once the graph shows it (its parameters are declared before its entities).
+    assert spin_until(executor, lambda: name in watcher.node.get_node_names(), 20.0)
+    spin_until(executor, lambda: False, 0.5)
+    node.send_signal(signal.SIGINT)
+    output, _ = node.communicate(timeout=20)
+    assert node.returncode == 0, output
+    assert "Traceback" not in output
