@@ -93,7 +93,10 @@ def test_estimator_killed_and_restarted_comes_back_from_initial_state(
     seen = collector_factory({"belief_predicted": Float64MultiArray,
                               "belief": Float64MultiArray,
                               "tile_observation": (String, INPUT_QOS)})
-    started = start_graph(processes, LOCALIZATION, "-p", "max_commands:=50", "-p",
+    # Long enough after the restart for a slow rediscovery: a restarted process was
+    # seen to take more than 2 s to be matched here (the dead one is still in the
+    # others' participant lists until its lease ends).
+    started = start_graph(processes, LOCALIZATION, "-p", "max_commands:=90", "-p",
                           "rate_hz:=10.0")
     assert spin_until(executor, lambda: seen.count("belief") >= 15, 30.0)
     started["estimator"].kill()   # a crash, not a clean stop
