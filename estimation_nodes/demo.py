@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -47,6 +48,10 @@ def scenario_dirs() -> list[Path]:
 
 
 def find_scenario(name: str) -> Path:
+    # A scenario is a name, not a path: --params-file is for files of your own.
+    if not re.fullmatch(r"[A-Za-z0-9_-]+", name):
+        raise DemoError(f"--scenario: {name!r} is not a scenario name (letters, digits, _ "
+                        f"and -); give a file with --params-file")
     for directory in scenario_dirs():
         candidate = directory / f"{name}.yaml"
         if candidate.is_file():

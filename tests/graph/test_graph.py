@@ -219,3 +219,13 @@ def test_ctrl_c_ends_a_node_cleanly(processes, executor, collector_factory, name
     output, _ = node.communicate(timeout=20)
     assert node.returncode == 0, output
     assert "Traceback" not in output
+
+
+@pytest.mark.parametrize("name, message", [
+    ("../../etc/hosts", "is not a scenario name"),
+    ("no_such_scenario", "known scenarios: ['default', 'example_6_14'"),
+])
+def test_demo_rejects_bad_scenario_names(ros_env, name, message):
+    result = subprocess.run([executable("estimation_demo"), "--scenario", name], env=ros_env,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2 and message in result.stderr, result.stderr
