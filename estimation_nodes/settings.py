@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from estimation_nodes.core import GaussianState, HistogramModel, LinearGaussianModel
+from estimation_nodes.core import GaussianState, HistogramModel, LinearGaussianModel, histogram
 from estimation_nodes.core.config import (
     BOOK_CLASSES,
     BOOK_KERNEL,
@@ -134,7 +134,7 @@ def build_initial_belief(values: Mapping[str, Any], size: int) -> FloatArray:
     """The prior: the given initial_belief, or uniform when it is unset."""
     given = values.get("initial_belief")
     if given is UNSET or (hasattr(given, "__len__") and len(given) == 0):
-        return np.full(size, 1.0 / size)
+        return histogram.uniform(size)
     return check_belief("initial_belief", as_list("initial_belief", given), size)
 
 
@@ -218,8 +218,26 @@ class EstimatorSettings:
     kalman: KalmanSettings
 
 
-def build_estimator_settings(values: Mapping[str, Any]) -> EstimatorSettings:
-    """Validate all estimator parameters together; ``ValueError`` names the first bad one."""
-    histogram = build_histogram_model(values)
-    initial_belief = build_initial_belief(values, histogram.size)
-    return EstimatorSettings(histogram, initial_belief, build_kalman_settings(values))
+#: The parameters the histogram model and the prior are built from.
+HISTOGRAM_KEYS = tuple(spec.name for spec in WORLD_SPECS) + ("initial_belief",)
+
+
+def build_estimator_settings(
+    values: Mapping[str, Any],
+    previous: tuple[Mapping[str, Any], EstimatorSettings] | None = None,
+) -> EstimatorSettings:
+    """Validate all estimator parameters together; ``ValueError`` names the first bad one.
+
+    With ``previous`` (the values and settings last built), the histogram model
+    and prior are reused when none of their parameters changed: a runtime change
+    of a Kalman variance then does not re-read a world file or rebuild the
+    likelihood tables of a million cells.
+    """
+    if previous is not None and all(
+        values.get(key) == previous[0].get(key) for key in HISTOGRAM_KEYS
+    ):
+        model, initial_belief = previous[1].histogram, previous[1].initial_belief
+    else:
+        model = build_histogram_model(values)
+        initial_belief = build_initial_belief(values, model.size)
+    return EstimatorSettings(model, initial_belief, build_kalman_settings(values))

@@ -97,8 +97,9 @@ class Estimator(Node):
     def _on_set_parameters(self, changes: list[Parameter]) -> SetParametersResult:
         """Validate the whole proposed configuration; apply it at the next event."""
         proposed = overlay(self._values, changes)
+        latest = self._pending or self._settings
         try:
-            settings = build_estimator_settings(proposed)
+            settings = build_estimator_settings(proposed, previous=(self._values, latest))
         except ValueError as error:
             return rejection(str(error))
         self._values = proposed

@@ -219,3 +219,17 @@ def test_matrix_mode_constant_velocity(driver):
         d.send(d.z, Float64(data=z), "kalman_estimate", step)
     xs = [m.pose.position.x for m in d.out.messages["kalman_estimate"]]
     np.testing.assert_allclose(xs, [2.113208, 5.045977, 7.021958, 8.010857, 9.005414], atol=1e-6)
+
+
+def test_kalman_change_reuses_the_histogram_model_and_a_world_change_rebuilds_it(driver):
+    d = driver()
+    model = d.estimator._settings.histogram
+    [result] = d.estimator.set_parameters([Parameter("kalman.var_z", value=9.0)])
+    assert result.successful
+    assert d.estimator._pending.histogram is model
+    assert d.estimator._pending.kalman.scalar.var_z == 9.0
+    [result] = d.estimator.set_parameters([Parameter("motion_kernel", value=[0.2, 0.6, 0.2])])
+    assert result.successful
+    assert d.estimator._pending.histogram is not model
+    np.testing.assert_array_equal(d.estimator._pending.histogram.kernel.weights,
+                                  [0.2, 0.6, 0.2])
