@@ -44,12 +44,18 @@ def hit_rate(corrected, truth):
 def test_sensor_restarted_mid_run_estimator_keeps_localizing(
         processes, executor, collector_factory):
     seen = collector_factory({"belief": Float64MultiArray, "true_position": Int64})
+    # start_delay also applies when the commander resumes: time for the new sensor's
+    # publishers to be discovered, so its readings are not held and sent late.
     started = start_graph(processes, LOCALIZATION, "-p", "max_commands:=60", "-p",
-                          "rate_hz:=10.0", "-p", "start_delay:=0.5")
-    assert spin_until(executor, lambda: seen.count("belief") >= 25, 30.0)
+                          "rate_hz:=10.0", "-p", "start_delay:=1.5")
+    assert spin_until(executor, lambda: seen.count("belief") >= 25
+                      and seen.count("true_position") >= 25, 30.0)
     sensor = started["tile_sensor"]
     sensor.send_signal(signal.SIGINT)   # a supervisor restarting it
     assert spin_until(executor, lambda: sensor.poll() is not None, 10.0)
+    # Take in what the old sensor sent just before it ended: its last truth is
+    # where the new one must start (seen under load: a stale one shifted the run).
+    wait_seconds(executor, 0.5)
     before = seen.count("true_position")
     last_truth = seen.messages["true_position"][-1].data
     # The robot has not moved while its sensor was down: the commander paused.
