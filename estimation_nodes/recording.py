@@ -154,7 +154,12 @@ def _add_decoded(record: RunRecord, topic: str, msg: object) -> None:
 
 
 def read_recording(path: Path) -> Recording:
-    """Decode every message of an MCAP recording into a RunRecord, in log-time order."""
+    """Decode every message of an MCAP recording into a RunRecord, in publish-time order.
+
+    Publish time (the writer's source timestamp) rather than the time the
+    recorder received it: under load the recorder can take a command after
+    the observation it caused, and the replay must see them as they happened.
+    """
     try:
         from mcap.exceptions import McapError
         from mcap.reader import make_reader
@@ -170,10 +175,13 @@ def read_recording(path: Path) -> Recording:
     try:
         with path.open("rb") as stream:
             reader = make_reader(stream, decoder_factories=[DecoderFactory()])
-            for _schema, channel, _message, decoded in reader.iter_decoded_messages(
-                    log_time_order=True):
-                counts[channel.topic] = counts.get(channel.topic, 0) + 1
-                _add_decoded(record, channel.topic, decoded)
+            messages = [(message.publish_time, message.log_time, channel.topic, decoded)
+                        for _schema, channel, message, decoded
+                        in reader.iter_decoded_messages(log_time_order=True)]
+            messages.sort(key=lambda item: item[:2])
+            for _publish, _log, topic, decoded in messages:
+                counts[topic] = counts.get(topic, 0) + 1
+                _add_decoded(record, topic, decoded)
             for entry in reader.iter_metadata():
                 if entry.name == METADATA_NAME:
                     metadata = dict(entry.metadata)

@@ -3,15 +3,16 @@
     estimation_replay RUN.mcap [--params-file FILE] [--tolerance 1e-9]
 
 The recording's inputs (motion_cmd, tile_observation, position_measurement,
-in recorded order) go through the same tracks the estimator uses, built from
+in the order they were published) go through the same tracks the estimator uses, built from
 the parameters stored in the recording (or a file you give). Each offline
 estimate is compared with the estimate recorded online, in order, topic by
 topic. Exit 0 when all agree to the tolerance, 1 otherwise, with each
 differing step shown; 2 when the recording cannot be read.
 
-Events of different topics reach the estimator and the recorder in no
-guaranteed order, so a run recorded under heavy load can differ where a
-command and an observation crossed; at the demo's rates they do not.
+Events of different topics reach the estimator in no guaranteed order, and
+it handles them as they arrive, so a run under heavy load can differ where
+a command reached it after the observation it caused; at the demo's rates
+they do not.
 """
 
 from __future__ import annotations
