@@ -7,6 +7,10 @@ import numpy as np
 from tests.conftest import spin_until
 
 NODES = ("estimator", "tile_sensor", "motion_commander")
+#: Seconds the commander waits after its subscribers match. Right after discovery
+#: a command can reach the estimator after the reading it caused (seen under CPU
+#: load at 0.5 s); the demo's default is 2 s.
+SETTLE = "1.5"
 
 
 def executable(name: str) -> str:
@@ -26,7 +30,8 @@ def start_graph(processes, scenario: Path, *commander_args: str, skip=()):
     for name in NODES:
         if name in skip:
             continue
-        extra = ["-p", "start_delay:=0.5", "-p", "exit_when_done:=true", *commander_args] \
+        extra = ["-p", f"start_delay:={SETTLE}", "-p", "exit_when_done:=true",
+                 *commander_args] \
             if name == "motion_commander" else []
         started[name] = processes(node_command(name, scenario, *extra))
     return started

@@ -180,7 +180,7 @@ def test_ros_processes_confined_to_localhost_by_demo(ros_env):
 
 
 def test_two_robots_in_namespaces_do_not_mix(processes, executor, collector_factory):
-    from tests.graph.graph_tools import node_command
+    from tests.graph.graph_tools import SETTLE, node_command
 
     seen = collector_factory({"/robot1/belief": Float64MultiArray,
                               "/robot2/belief": Float64MultiArray,
@@ -190,7 +190,7 @@ def test_two_robots_in_namespaces_do_not_mix(processes, executor, collector_fact
         for name in ("estimator", "tile_sensor", "motion_commander"):
             extra = ["-r", f"__ns:=/{robot}"]
             if name == "motion_commander":
-                extra += ["-p", "start_delay:=0.5", "-p", "exit_when_done:=true",
+                extra += ["-p", f"start_delay:={SETTLE}", "-p", "exit_when_done:=true",
                           "-p", "max_commands:=3", "-p", "rate_hz:=5.0"]
             process = processes(node_command(name, SCENARIOS / scenario, *extra))
             if name == "motion_commander":
