@@ -83,8 +83,7 @@ def kalman_rows(repeats: int) -> list[list[str]]:
 
     def scalar() -> None:
         x, var = kalman.predict_scalar(state[0], state[1], 1.0, 2.0)
-        corrected = kalman.correct_scalar(x, var, 4.0, 4.0)
-        state[0], state[1] = corrected.x, corrected.var
+        state[0], state[1], _ = kalman.correct_scalar(x, var, 4.0, 4.0)
 
     def filterpy_1d() -> None:
         kf1.predict(u=np.array([[1.0]]))

@@ -100,9 +100,9 @@ class KalmanTrack:
         scalar, matrix = self._settings.scalar, self._settings.matrix
         if scalar is not None:
             x, var = self.x[0], self.P[0, 0]
-            corrected = kalman.correct_scalar(x, var, z, scalar.var_z)
+            x_corrected, var_corrected, _ = kalman.correct_scalar(x, var, z, scalar.var_z)
             self.last_nis = (z - x) ** 2 / (var + scalar.var_z)
-            self.x, self.P = np.array([corrected.x]), np.array([[corrected.var]])
+            self.x, self.P = np.array([x_corrected]), np.array([[var_corrected]])
         else:
             assert matrix is not None
             nis = kalman.normalized_innovation_squared(self.x, self.P, [z], matrix)

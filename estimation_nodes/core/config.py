@@ -296,6 +296,10 @@ class LinearGaussianModel:
     process_noise: FloatArray = field(init=False, repr=False, compare=False)
     #: The n x n identity, for the Joseph form.
     identity: FloatArray = field(init=False, repr=False, compare=False)
+    #: A' / 2, contiguous: the prediction's symmetric product (see kalman.predict).
+    half_A_transposed: FloatArray = field(init=False, repr=False, compare=False)
+    #: C', contiguous, for the gain.
+    C_transposed: FloatArray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         A = as_finite_array("A", self.A, ndim=2)
@@ -326,6 +330,12 @@ class LinearGaussianModel:
         identity.setflags(write=False)
         object.__setattr__(self, "process_noise", process_noise)
         object.__setattr__(self, "identity", identity)
+        # Halving is exact in binary floating point, so products with A'/2 are
+        # bit for bit half the products with A'.
+        for name, matrix in (("half_A_transposed", 0.5 * A.T), ("C_transposed", C.T)):
+            matrix = np.ascontiguousarray(matrix)
+            matrix.setflags(write=False)
+            object.__setattr__(self, name, matrix)
 
     @property
     def state_size(self) -> int:

@@ -106,8 +106,8 @@ def test_fusion_formula_example_6_15():
 
 def test_fusion_is_a_scalar_correction():
     fused = kalman.fuse(2.0, 4.0, 4.0, 1.0)
-    corrected = kalman.correct_scalar(2.0, 4.0, 4.0, 1.0)
-    np.testing.assert_allclose([corrected.x, corrected.var], [fused.x, fused.var], rtol=1e-12)
+    x, var, _ = kalman.correct_scalar(2.0, 4.0, 4.0, 1.0)
+    np.testing.assert_allclose([x, var], [fused.x, fused.var], rtol=1e-12)
 
 
 EXAMPLE_6_18 = dict(
@@ -126,9 +126,9 @@ def run_scalar_6_18():
     rows = []
     for u, z in zip(e["u"], e["z"]):
         x, var = kalman.predict_scalar(x, var, u, e["var_u"])
-        corrected = kalman.correct_scalar(x, var, z, e["var_z"])
-        rows.append((x, var, corrected.x, corrected.var, corrected.gain))
-        x, var = corrected.x, corrected.var
+        x_corrected, var_corrected, gain = kalman.correct_scalar(x, var, z, e["var_z"])
+        rows.append((x, var, x_corrected, var_corrected, gain))
+        x, var = x_corrected, var_corrected
     return np.array(rows)
 
 
