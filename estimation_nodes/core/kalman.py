@@ -92,22 +92,23 @@ def _as_vector(name: str, value: object, size: int) -> FloatArray:
     return vector
 
 
-def _inverse_of_innovation_covariance(S: FloatArray) -> FloatArray:
-    """S^-1 for the symmetric positive definite S = C P C' + R.
+def _gain(PCt: FloatArray, S: FloatArray) -> FloatArray:
+    """K = P C' S^-1 for the symmetric positive definite S = C P C' + R.
 
-    One and two measurements, the common cases, in closed form: a LAPACK call
-    costs several microseconds of overhead on a 2 x 2. A determinant that is
-    not clearly positive (S near singular) goes to LAPACK, as do larger S.
+    One and two measurements, the common cases, use S^-1 in closed form: a
+    LAPACK call costs several microseconds of overhead on a 2 x 2. A nearly
+    singular S, where the closed form loses accuracy, and larger S go to a
+    LAPACK solve: S and P are symmetric, so K' = S^-1 (C P).
     """
     size = S.shape[0]
     if size == 1:
-        return cast(FloatArray, 1.0 / S)
+        return cast(FloatArray, PCt / S[0, 0])
     if size == 2:
         (a, b), (c, d) = S.tolist()
         determinant = a * d - b * c
-        if determinant > 1e-12 * (a * d) and math.isfinite(determinant):
-            return np.array([[d, -b], [-c, a]]) / determinant
-    return cast(FloatArray, np.linalg.inv(S))
+        if determinant > 1e-8 * (a * d) and math.isfinite(determinant):
+            return PCt.dot(np.array([[d, -b], [-c, a]]) / determinant)
+    return cast(FloatArray, np.linalg.solve(S, PCt.T).T)
 
 
 def predict(
@@ -147,7 +148,7 @@ def correct(
     PCt = P.dot(model.C_transposed)
     innovation_cov = C.dot(PCt)
     innovation_cov += R
-    K = PCt.dot(_inverse_of_innovation_covariance(innovation_cov))
+    K = _gain(PCt, innovation_cov)
     x_new = x + K.dot(z_vec - C.dot(x))
     I_KC = model.identity - K.dot(C)
     P_new = I_KC.dot(P).dot(I_KC.T)
@@ -163,4 +164,4 @@ def normalized_innovation_squared(
     innovation = z_vec - model.C.dot(x)
     innovation_cov = model.C.dot(P).dot(model.C_transposed)
     innovation_cov += model.R
-    return float(innovation.dot(_inverse_of_innovation_covariance(innovation_cov)).dot(innovation))
+    return float(innovation.dot(np.linalg.solve(innovation_cov, innovation)))

@@ -78,3 +78,31 @@ def test_normalized_innovation_squared_scalar():
     model = LinearGaussianModel.scalar(2.0, 4.0)
     nis = kalman.normalized_innovation_squared(np.array([1.0]), np.array([[5.0]]), [4.0], model)
     np.testing.assert_allclose(nis, 9.0 / 9.0)
+
+
+def reference_gain(P, model):
+    S = model.C @ P @ model.C.T + model.R
+    return np.linalg.solve(S, model.C @ P).T
+
+
+@settings(max_examples=100, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), p=st.integers(1, 3))
+def test_gain_matches_a_lapack_solve_for_one_to_three_measurements(seed, p):
+    # One and two measurements take a closed-form inverse; three take LAPACK.
+    rng = np.random.default_rng(seed)
+    model = random_model(rng, 4, 1, p, 4)
+    P = spd(rng, 4)
+    _, _, K = kalman.correct(np.zeros(4), P, np.zeros(p), model)
+    np.testing.assert_allclose(K, reference_gain(P, model), rtol=1e-9, atol=1e-12)
+
+
+def test_gain_with_a_nearly_singular_innovation_covariance():
+    # Two almost parallel measurement rows and a tiny R: S is nearly singular
+    # (condition about 1e13), where the closed form would lose digits, so the
+    # gain must be LAPACK's solve, the same to rounding.
+    C = np.array([[1.0, 0.0], [1.0, 1e-9]])
+    model = LinearGaussianModel(np.eye(2), np.eye(2), C, np.eye(2), np.eye(2), np.eye(2) * 1e-14)
+    P = np.array([[2.0, 0.3], [0.3, 1.0]])
+    _, P_new, K = kalman.correct(np.zeros(2), P, np.array([1.0, 1.0]), model)
+    np.testing.assert_allclose(K, reference_gain(P, model), rtol=1e-12)
+    assert np.all(np.isfinite(P_new))
