@@ -23,6 +23,12 @@ class HistogramTrack:
         self._settings = settings
         self.belief: FloatArray = settings.initial_belief.copy()
         self.last_evidence = float("nan")
+        self.compiled = self._prepare_kernels()
+
+    def _prepare_kernels(self) -> bool:
+        """Load a large world's compiled kernels now, so the first step is not the one
+        that waits for numba. True when the steps run compiled."""
+        return histogram.compiled_kernels(self._settings.histogram.size) is not None
 
     def reconfigure(self, settings: EstimatorSettings) -> bool:
         """Take new models; the belief restarts only when the world size or prior changed.
@@ -35,6 +41,7 @@ class HistogramTrack:
             settings.initial_belief, old.initial_belief
         )
         if restart:
+            self.compiled = self._prepare_kernels()
             self.reset()
         return restart
 

@@ -90,7 +90,9 @@ class Estimator(Node):
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(self._values["diagnostics_period"], self._publish_diagnostics)
         self.get_logger().info(
-            f"ready: {settings.histogram.size} cells, Kalman mode {settings.kalman.mode}")
+            f"ready: {settings.histogram.size} cells"
+            f"{' (compiled histogram kernels)' if self._histogram.compiled else ''},"
+            f" Kalman mode {settings.kalman.mode}")
 
     # --- parameters -------------------------------------------------------------------------
 

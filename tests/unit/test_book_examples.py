@@ -9,7 +9,8 @@ TOL = 1e-6
 
 
 @pytest.fixture
-def book() -> HistogramModel:
+def book(histogram_path) -> HistogramModel:
+    """The book's world; the histogram examples run on both code paths of the core."""
     return HistogramModel.book()
 
 

@@ -8,6 +8,9 @@ from hypothesis.extra.numpy import arrays
 
 from estimation_nodes.core import HistogramModel, MotionKernel, histogram
 
+# Every histogram test here runs on numpy's path and on the compiled one.
+pytestmark = pytest.mark.usefixtures("histogram_path")
+
 
 def loop_predict(belief, u, weights):
     """The prediction written as the book's sum, one cell and one tap at a time."""
