@@ -8,6 +8,8 @@ world_file (seeded random dark and bright). A driver here sends a
 ``belief`` (N doubles) to arrive: one full step, including both published
 belief messages. The estimator's resident memory (VmRSS) is compared with
 that of a bare rclpy node (bench/relay_node.py, idle) plus 3 x N x 8 bytes.
+Both histogram code paths are measured: numpy's (the node's default) and
+the compiled kernels (numba, compiled_kernels:=true).
 """
 
 from __future__ import annotations
@@ -53,91 +55,104 @@ def main() -> None:
     env = confine_ros(78)
 
     import rclpy
+
+    rclpy.init()
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            world = write_world(args.cells, Path(tmp))
+            runs = {compiled: measure(world, env, compiled, args)
+                    for compiled in (False, True)}
+    finally:
+        rclpy.try_shutdown()
+    arrays_mib = 3 * args.cells * 8 / 2**20
+    print(f"Large world: N = {args.cells:,} cells, {args.steps} full steps "
+          f"(predict + correct + both beliefs published and received), "
+          f"with compiled_kernels true and false")
+
+    def row(name, figure):
+        return [name] + [figure(runs[compiled]) for compiled in (False, True)]
+
+    print(table(
+        ["figure", "numpy path (default)", "compiled_kernels:=true"],
+        [row("up and answering after", lambda r: f"{r['ready']:.1f} s"),
+         row("full step, median", lambda r: f"{np.median(r['durations']) * 1e3:.1f} ms "
+             f"({1 / np.median(r['durations']):.1f} steps/s)"),
+         row("full step, p10..p90", lambda r: f"{np.percentile(r['durations'], 10) * 1e3:.1f}.."
+             f"{np.percentile(r['durations'], 90) * 1e3:.1f} ms"),
+         row("estimator RSS", lambda r: f"{r['estimator_rss']:.0f} MiB"),
+         row("bare rclpy node RSS + 3 x N x 8 B", lambda r: f"{r['bare_rss']:.0f} + "
+             f"{arrays_mib:.0f} = {r['bare_rss'] + arrays_mib:.0f} MiB"),
+         row("ratio", lambda r: f"{r['estimator_rss'] / (r['bare_rss'] + arrays_mib):.2f}")]))
+
+
+def measure(world: Path, env: dict, compiled: bool, args: argparse.Namespace) -> dict:
+    """One estimator process on the world: time to answer, full steps, memory."""
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray, Int32, String
 
     from estimation_nodes.nodes.ros_common import INPUT_QOS, latched_qos
 
-    rclpy.init()
-    with tempfile.TemporaryDirectory() as tmp:
-        world = write_world(args.cells, Path(tmp))
-        bare = start("relay", env)
-        started = time.perf_counter()
-        estimator = subprocess_estimator(world, env)
-        node = Node("large_world_driver")
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        beliefs: list[float] = []
-        predicted: list[float] = []
-        sizes: set[int] = set()
+    bare = start("relay", env)
+    started = time.perf_counter()
+    estimator = subprocess_estimator(world, env, compiled)
+    node = Node("large_world_driver")
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    beliefs: list[float] = []
+    predicted: list[float] = []
+    sizes: set[int] = set()
 
-        def on_belief(msg) -> None:
-            beliefs.append(time.perf_counter())
-            sizes.add(len(msg.data))
+    def on_belief(msg) -> None:
+        beliefs.append(time.perf_counter())
+        sizes.add(len(msg.data))
 
-        node.create_subscription(Float64MultiArray, "belief", on_belief, latched_qos(1))
-        node.create_subscription(Float64MultiArray, "belief_predicted",
-                                 lambda m: predicted.append(time.perf_counter()),
-                                 latched_qos(1))
-        cmd = node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
-        tile = node.create_publisher(String, "tile_observation", INPUT_QOS)
+    node.create_subscription(Float64MultiArray, "belief", on_belief, latched_qos(1))
+    node.create_subscription(Float64MultiArray, "belief_predicted",
+                             lambda m: predicted.append(time.perf_counter()), latched_qos(1))
+    cmd = node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+    tile = node.create_publisher(String, "tile_observation", INPUT_QOS)
 
-        def spin_until(predicate, timeout=120.0):
-            deadline = time.monotonic() + timeout
-            while not predicate():
-                if time.monotonic() > deadline:
-                    raise RuntimeError("timed out")
-                executor.spin_once(timeout_sec=0.05)
+    def spin_until(predicate, timeout=120.0):
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                raise RuntimeError("timed out")
+            executor.spin_once(timeout_sec=0.05)
 
-        try:
-            spin_until(lambda: cmd.get_subscription_count() >= 1
-                       and tile.get_subscription_count() >= 1)
-            cmd.publish(Int32(data=1))
-            spin_until(lambda: len(predicted) >= 1)
-            ready = time.perf_counter() - started
-            durations = []
-            rng = np.random.default_rng(1)
-            for _ in range(args.steps + 3):
-                target = len(beliefs) + 1
-                begin = time.perf_counter()
-                cmd.publish(Int32(data=int(rng.integers(-2, 3))))
-                tile.publish(String(data=("dark", "bright")[int(rng.integers(0, 2))]))
-                spin_until(lambda t=target: len(beliefs) >= t)
-                durations.append(beliefs[-1] - begin)
-            durations = np.array(durations[3:])
-            if sizes != {args.cells}:
-                raise RuntimeError(f"beliefs of {sizes} values, expected {args.cells}")
-            estimator_rss = resident_mib(estimator.pid)
-            bare_rss = resident_mib(bare.pid)
-        finally:
-            executor.shutdown()
-            node.destroy_node()
-            stop_process(estimator)
-            stop_process(bare)
-            rclpy.try_shutdown()
-    arrays_mib = 3 * args.cells * 8 / 2**20
-    print(f"Large world: N = {args.cells:,} cells, {args.steps} full steps "
-          f"(predict + correct + both beliefs published and received); "
-          f"estimator up and answering after {ready:.1f} s")
-    print(table(
-        ["figure", "value"],
-        [["full step, median", f"{np.median(durations) * 1e3:.1f} ms "
-          f"({1 / np.median(durations):.1f} steps/s)"],
-         ["full step, p10..p90", f"{np.percentile(durations, 10) * 1e3:.1f}.."
-          f"{np.percentile(durations, 90) * 1e3:.1f} ms"],
-         ["estimator RSS", f"{estimator_rss:.0f} MiB"],
-         ["bare rclpy node RSS + 3 x N x 8 B", f"{bare_rss:.0f} + {arrays_mib:.0f} = "
-          f"{bare_rss + arrays_mib:.0f} MiB"],
-         ["ratio", f"{estimator_rss / (bare_rss + arrays_mib):.2f}"]]))
+    try:
+        spin_until(lambda: cmd.get_subscription_count() >= 1
+                   and tile.get_subscription_count() >= 1)
+        cmd.publish(Int32(data=1))
+        spin_until(lambda: len(predicted) >= 1)
+        ready = time.perf_counter() - started
+        durations = []
+        rng = np.random.default_rng(1)
+        for _ in range(args.steps + 3):
+            target = len(beliefs) + 1
+            begin = time.perf_counter()
+            cmd.publish(Int32(data=int(rng.integers(-2, 3))))
+            tile.publish(String(data=("dark", "bright")[int(rng.integers(0, 2))]))
+            spin_until(lambda t=target: len(beliefs) >= t)
+            durations.append(beliefs[-1] - begin)
+        if sizes != {args.cells}:
+            raise RuntimeError(f"beliefs of {sizes} values, expected {args.cells}")
+        return dict(ready=ready, durations=np.array(durations[3:]),
+                    estimator_rss=resident_mib(estimator.pid), bare_rss=resident_mib(bare.pid))
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        stop_process(estimator)
+        stop_process(bare)
 
 
-def subprocess_estimator(world: Path, env: dict):
+def subprocess_estimator(world: Path, env: dict, compiled: bool):
     import subprocess
 
     return subprocess.Popen(
         [sys.executable, "-m", "estimation_nodes.nodes.estimator", "--ros-args",
-         "-p", f"world_file:={world}", "-p", "history_depth:=1", "--log-level", "warn"],
+         "-p", f"world_file:={world}", "-p", "history_depth:=1",
+         "-p", f"compiled_kernels:={str(compiled).lower()}", "--log-level", "warn"],
         env=env)
 
 

@@ -87,8 +87,11 @@ def _at(sequence: list, index: int):
 
 def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comparison:
     """Run the tracks over the recorded inputs; compare every estimate with the recorded one."""
-    settings = build_estimator_settings(estimator_values(parameters_yaml))
-    belief, kalman = HistogramTrack(settings), KalmanTrack(settings.kalman)
+    values = estimator_values(parameters_yaml)
+    settings = build_estimator_settings(values)
+    # The same code path as the recorded estimator: both are exact only to rounding.
+    belief = HistogramTrack(settings, values["compiled_kernels"])
+    kalman = KalmanTrack(settings.kalman)
     run = recording.record
     comparison = Comparison()
     counts = {"belief_predicted": 0, "belief": 0, "kalman_estimate": 0}

@@ -19,8 +19,9 @@ from estimation_nodes.settings import EstimatorSettings, KalmanSettings
 class HistogramTrack:
     """The histogram belief over the world's cells."""
 
-    def __init__(self, settings: EstimatorSettings) -> None:
+    def __init__(self, settings: EstimatorSettings, allow_compiled: bool = True) -> None:
         self._settings = settings
+        self._allow_compiled = allow_compiled
         self.belief: FloatArray = settings.initial_belief.copy()
         self.last_evidence = float("nan")
         self.compiled = self._prepare_kernels()
@@ -28,7 +29,8 @@ class HistogramTrack:
     def _prepare_kernels(self) -> bool:
         """Load a large world's compiled kernels now, so the first step is not the one
         that waits for numba. True when the steps run compiled."""
-        return histogram.compiled_kernels(self._settings.histogram.size) is not None
+        size = self._settings.histogram.size
+        return histogram.compiled_kernels(size, self._allow_compiled) is not None
 
     def reconfigure(self, settings: EstimatorSettings) -> bool:
         """Take new models; the belief restarts only when the world size or prior changed.
@@ -50,7 +52,8 @@ class HistogramTrack:
         self.last_evidence = float("nan")
 
     def predict(self, u: int) -> FloatArray:
-        self.belief = histogram.predict(self.belief, u, self._settings.histogram.kernel)
+        self.belief = histogram.predict(
+            self.belief, u, self._settings.histogram.kernel, compiled=self.compiled)
         return self.belief
 
     def correct(self, observed: str) -> FloatArray:
@@ -59,7 +62,7 @@ class HistogramTrack:
         # In place: the belief is this track's own array (predict and reset make new
         # ones, and publishing copies it), and correct() leaves it alone on an error.
         self.belief, self.last_evidence = histogram.correct(
-            self.belief, likelihood, out=self.belief)
+            self.belief, likelihood, out=self.belief, compiled=self.compiled)
         return self.belief
 
 

@@ -60,14 +60,15 @@ def _compiled_module() -> ModuleType | None:
     return compiled
 
 
-def compiled_kernels(size: int) -> ModuleType | None:
+def compiled_kernels(size: int, allowed: bool = True) -> ModuleType | None:
     """The compiled kernels a world of ``size`` cells uses, or None for numpy's.
 
-    The first call for a large world imports numba and compiles (or loads
-    from cache) the kernels; a caller that minds latency calls this at
-    start-up rather than at its first step.
+    ``allowed=False`` always gives numpy's path (numba and LLVM hold about
+    150 MB of memory once imported). The first call for a large world
+    imports numba and compiles (or loads from cache) the kernels; a caller
+    that minds latency calls this at start-up rather than at its first step.
     """
-    return _compiled_module() if size >= COMPILED_MIN_CELLS else None
+    return _compiled_module() if allowed and size >= COMPILED_MIN_CELLS else None
 
 
 def _wrapped(belief: FloatArray, shift: int, half_width: int) -> FloatArray:
@@ -89,7 +90,9 @@ def _wrapped(belief: FloatArray, shift: int, half_width: int) -> FloatArray:
     return padded
 
 
-def predict(belief: FloatArray, u: int, kernel: MotionKernel) -> FloatArray:
+def predict(
+    belief: FloatArray, u: int, kernel: MotionKernel, *, compiled: bool = True
+) -> FloatArray:
     """Belief after a move of ``u`` cells (any integer, either direction).
 
     Runs in O(N * len(kernel)) time and O(N) memory: no N x N matrix. The
@@ -105,6 +108,8 @@ def predict(belief: FloatArray, u: int, kernel: MotionKernel) -> FloatArray:
         Commanded move; positive is counter-clockwise (index + u).
     kernel : MotionKernel
         Probabilities of landing at offsets around the target.
+    compiled : bool
+        Whether a large world may use the compiled kernels (``compiled_kernels``).
 
     Returns
     -------
@@ -114,7 +119,7 @@ def predict(belief: FloatArray, u: int, kernel: MotionKernel) -> FloatArray:
     source = np.ascontiguousarray(belief, dtype=np.float64)
     # Python ints: a huge u wraps exactly instead of overflowing a fixed-width type.
     shift = int(u) % source.size
-    kernels = compiled_kernels(source.size)
+    kernels = compiled_kernels(source.size, compiled)
     if kernels is not None:   # shift, wrap and kernel in one compiled pass
         predicted = np.empty(source.size)
         kernels.predict_into(source, shift, kernel.weights, predicted)
@@ -125,14 +130,18 @@ def predict(belief: FloatArray, u: int, kernel: MotionKernel) -> FloatArray:
 
 
 def correct(
-    belief: FloatArray, likelihood: FloatArray, out: FloatArray | None = None
+    belief: FloatArray,
+    likelihood: FloatArray,
+    out: FloatArray | None = None,
+    *,
+    compiled: bool = True,
 ) -> tuple[FloatArray, float]:
     """Posterior belief and evidence p(z | earlier data) after one observation.
 
     The posterior is a new array unless ``out`` is given (it may be ``belief``
     itself, for a caller that owns it: large worlds then allocate nothing).
     ``out`` is written only after the evidence is known to be positive, so a
-    rejected observation leaves it as it was.
+    rejected observation leaves it as it was. ``compiled`` as in ``predict``.
 
     Raises
     ------
@@ -146,7 +155,7 @@ def correct(
         raise ZeroEvidenceError(
             f"observation has evidence {evidence!r}: every cell of the belief rules it out"
         )
-    kernels = compiled_kernels(belief.size)
+    kernels = compiled_kernels(belief.size, compiled)
     if kernels is not None:   # product and scaling fused: the same operations, one pass
         posterior = np.empty(belief.size) if out is None else out
         kernels.scaled_product_into(

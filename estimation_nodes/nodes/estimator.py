@@ -64,7 +64,7 @@ class Estimator(Node):
             raise ConfigurationError(str(error)) from None
         self._settings = settings
         self._pending: EstimatorSettings | None = None
-        self._histogram = HistogramTrack(settings)
+        self._histogram = HistogramTrack(settings, self._values["compiled_kernels"])
         self._kalman = KalmanTrack(settings.kalman)
         self.handled: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()

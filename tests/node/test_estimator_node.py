@@ -233,3 +233,22 @@ def test_kalman_change_reuses_the_histogram_model_and_a_world_change_rebuilds_it
     assert d.estimator._pending.histogram is not model
     np.testing.assert_array_equal(d.estimator._pending.histogram.kernel.weights,
                                   [0.2, 0.6, 0.2])
+
+
+@pytest.mark.parametrize("compiled", [True, False])
+def test_large_world_on_either_histogram_code_path(driver, compiled):
+    size = histogram.COMPILED_MIN_CELLS
+    rng = np.random.default_rng(4)
+    world = [str(c) for c in np.where(rng.random(size) < 0.5, "dark", "bright")]
+    d = driver(world=world, compiled_kernels=compiled)
+    assert d.estimator._histogram.compiled is compiled
+    model = d.estimator._settings.histogram
+    expected = histogram.uniform(size)
+    for step, (u, observed) in enumerate([(1, "bright"), (3, "dark"), (-2, "dark")], start=1):
+        d.send(d.cmd, Int32(data=u), "belief_predicted", step)
+        d.send(d.tile, String(data=observed), "belief", step)
+        # The reference always takes numpy's path.
+        predicted = histogram.predict(expected, u, model.kernel, compiled=False)
+        expected, _ = histogram.correct(predicted, model.likelihood(observed), compiled=False)
+        np.testing.assert_allclose(d.belief("belief_predicted"), predicted, rtol=1e-12)
+        np.testing.assert_allclose(d.belief(), expected, rtol=1e-12)
