@@ -30,6 +30,7 @@ from std_srvs.srv import Trigger
 
 from estimation_nodes.core import histogram
 from estimation_nodes.memory import keep_freed_memory
+from estimation_nodes.nodes.qos_events import INCOMPATIBLE_QOS, MESSAGE_LOST, SubscriptionEvents
 from estimation_nodes.nodes.ros_common import (
     INPUT_QOS,
     ConfigurationError,
@@ -80,13 +81,18 @@ class Estimator(Node):
         self._diagnostics_pub = self._output(DiagnosticArray, "/diagnostics", 10)
         # motion_cmd first: when a command and the reading it caused are ready
         # together, the executor takes them in subscription order.
+        self.qos_incompatible: Counter[str] = Counter()
+        self._input_events = SubscriptionEvents(self.default_callback_group)
         for msg_type, topic, callback in (
             (Int32, "motion_cmd", self._on_motion_cmd),
             (String, "tile_observation", self._on_tile_observation),
             (Float64, "position_measurement", self._on_position_measurement),
         ):
-            self.create_subscription(msg_type, topic, callback, INPUT_QOS,
-                                     event_callbacks=self._input_events(topic))
+            subscription = self.create_subscription(
+                msg_type, topic, callback, INPUT_QOS,
+                event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+            self._watch_input_events(subscription, topic)
+        self.add_waitable(self._input_events)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(self._values["diagnostics_period"], self._publish_diagnostics)
         self.get_logger().info(
@@ -169,7 +175,8 @@ class Estimator(Node):
     # each iteration, whether or not it fires: rclpy gives each publisher and
     # subscription two by default, 21 in all for this node, which made an idle
     # spin 257 us instead of 138 us for a one-subscription node. Only the events
-    # worth it are kept (see bench/README.md).
+    # worth it are kept, the inputs' six in one waitable (qos_events.py; figures
+    # in bench/README.md).
 
     def _output(self, msg_type: type, topic: str, qos: Any):
         """A publisher without rclpy's default QoS event handlers.
@@ -182,7 +189,7 @@ class Estimator(Node):
             msg_type, topic, qos,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
-    def _input_events(self, topic: str) -> SubscriptionEventCallbacks:
+    def _watch_input_events(self, subscription: Any, topic: str) -> None:
         """Count messages DDS reports lost, and warn of publishers we cannot hear."""
 
         def on_lost(info: QoSMessageLostInfo) -> None:
@@ -190,14 +197,20 @@ class Estimator(Node):
                          count=info.total_count_change)
 
         def on_incompatible_qos(info: QoSRequestedIncompatibleQoSInfo) -> None:
+            self.qos_incompatible[topic] += info.total_count_change
             self.get_logger().warning(
                 f"a publisher on {topic} offers QoS this node cannot accept (policy "
                 f"{qos_policy_name_from_kind(info.last_policy_kind)}): its messages are not "
                 f"received; publish reliable")
 
-        return SubscriptionEventCallbacks(message_lost=on_lost,
-                                          incompatible_qos=on_incompatible_qos,
-                                          use_default_callbacks=False)
+        self._input_events.watch(subscription, MESSAGE_LOST, on_lost)
+        self._input_events.watch(subscription, INCOMPATIBLE_QOS, on_incompatible_qos)
+
+    def destroy_node(self) -> None:
+        # The event handles refer to the subscriptions: release them first.
+        self.remove_waitable(self._input_events)
+        self._input_events.destroy()
+        super().destroy_node()
 
     def _reject(self, reason: str, message: str, count: int = 1) -> None:
         self.rejected[reason] += count
@@ -221,6 +234,8 @@ class Estimator(Node):
         }
         values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
         values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
+        values.update({f"incompatible_publishers.{k}": v
+                       for k, v in sorted(self.qos_incompatible.items())})
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if self.rejected else DiagnosticStatus.OK,
             name=f"{self.get_name()}: filters",

@@ -252,3 +252,16 @@ def test_large_world_on_either_histogram_code_path(driver, compiled):
         expected, _ = histogram.correct(predicted, model.likelihood(observed), compiled=False)
         np.testing.assert_allclose(d.belief("belief_predicted"), predicted, rtol=1e-12)
         np.testing.assert_allclose(d.belief(), expected, rtol=1e-12)
+
+
+def test_a_publisher_with_incompatible_qos_is_reported(driver, executor):
+    # A best-effort publisher cannot reach the estimator's reliable inputs; the
+    # estimator's input-event waitable must hear of it and count it.
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+
+    d = driver()
+    best_effort = QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT)
+    d.out.node.create_publisher(String, "tile_observation", best_effort)
+    assert spin_until(executor, lambda: d.estimator.qos_incompatible["tile_observation"] >= 1,
+                      10.0)
+    assert d.estimator.qos_incompatible["motion_cmd"] == 0
