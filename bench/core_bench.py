@@ -37,7 +37,8 @@ def book_like_kernel(width: int) -> MotionKernel:
     return MotionKernel(weights / weights.sum())
 
 
-def histogram_row(n: int, width: int, repeats: int) -> list[str]:
+def histogram_row(n: int, width: int, repeats: int, compiled: bool = True) -> list[str]:
+    """One row; ``compiled=False`` keeps large worlds on numpy's path (see histogram.py)."""
     rng = np.random.default_rng(n + width)
     prior = rng.random(n)
     prior /= prior.sum()
@@ -47,8 +48,8 @@ def histogram_row(n: int, width: int, repeats: int) -> list[str]:
     a, b, c = np.empty(n), np.empty(n), np.empty(n)
 
     def ours() -> None:
-        predicted = histogram.predict(prior, 1, kernel)
-        histogram.correct(predicted, likelihood, out=predicted)
+        predicted = histogram.predict(prior, 1, kernel, compiled=compiled)
+        histogram.correct(predicted, likelihood, out=predicted, compiled=compiled)
 
     def filterpy_step() -> None:
         discrete_bayes.update(likelihood, discrete_bayes.predict(prior, 1, weights))
@@ -59,13 +60,14 @@ def histogram_row(n: int, width: int, repeats: int) -> list[str]:
         np.add(a, b, out=c)
 
     # The same answer first: a benchmark of a wrong result would mean nothing.
-    predicted = histogram.predict(prior, 1, kernel)
-    posterior, _ = histogram.correct(predicted, likelihood)
+    predicted = histogram.predict(prior, 1, kernel, compiled=compiled)
+    posterior, _ = histogram.correct(predicted, likelihood, compiled=compiled)
     reference = discrete_bayes.update(likelihood, discrete_bayes.predict(prior, 1, weights))
     np.testing.assert_allclose(posterior, reference, rtol=1e-9, atol=1e-15)
 
     t = compare({"ours": ours, "filterpy": filterpy_step, "floor": floor}, repeats=repeats)
-    return [f"{n:,}", str(width), format_seconds(t["ours"].median), t["ours"].spread(),
+    path = "compiled" if histogram.compiled_kernels(n, compiled) else "numpy"
+    return [f"{n:,}", str(width), path, format_seconds(t["ours"].median), t["ours"].spread(),
             format_seconds(t["filterpy"].median),
             f"{t['filterpy'].median / t['ours'].median:.1f}x",
             format_seconds(t["floor"].median),
@@ -130,9 +132,10 @@ def main() -> None:
     # As in the estimator process; filterpy runs in this same process, with the same allocator.
     print(f"allocator thresholds raised as in the estimator: {keep_freed_memory()}")
     rows = [histogram_row(n, 3, repeats) for n in (5, 1_000, 100_000, 1_000_000)]
+    rows += [histogram_row(n, 3, repeats, compiled=False) for n in (100_000, 1_000_000)]
     rows += [histogram_row(n, width, repeats) for width in (7, 31) for n in (1_000, 1_000_000)]
     print("Histogram step (predict u=1 + correct); ratios of medians, same run, same inputs")
-    print(table(["N", "kernel", "ours", "ours p10..p90", "filterpy", "filterpy / ours",
+    print(table(["N", "kernel", "path", "ours", "ours p10..p90", "filterpy", "filterpy / ours",
                  "floor (3 passes)", "ours / floor"], rows))
     print()
     print("Kalman step (one predict + one correct)")
