@@ -10,11 +10,15 @@ alternating rounds, so both see the same machine. Latency: one message in
 flight, publish to receipt, p50 and p99. Throughput: a window of 100 in
 flight (inside the subscriptions' depth of 1000, so nothing may be lost),
 events per second until every answer is back; a lost message fails the run.
+The node's CPU time per event during the throughput run is printed too: on
+a shared machine it moves less than the rate, and the rate a node sustains
+is bounded by it.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import time
@@ -113,7 +117,13 @@ class Driver:
         self.node.destroy_node()
 
 
-def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float]:
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time a process has used so far (/proc/PID/stat)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float, float]:
     from std_msgs.msg import Float64MultiArray, String
 
     from estimation_nodes.nodes.ros_common import latched_qos
@@ -127,8 +137,10 @@ def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float]:
         driver.connect()
         driver.latency(200)   # warm-up
         latencies = driver.latency(events)
+        cpu_before = cpu_seconds(process.pid)
         rate = driver.throughput(events)
-        return latencies, rate
+        cpu_per_event = (cpu_seconds(process.pid) - cpu_before) / events
+        return latencies, rate, cpu_per_event
     finally:
         driver.close()
         stop_process(process)
@@ -137,20 +149,21 @@ def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--events", type=int, default=3000)
-    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--rounds", type=int, default=5)
     args = parser.parse_args()
     env = confine_ros(77)
     import rclpy
 
     rclpy.init()
-    results: dict[str, dict[str, list]] = {k: {"lat": [], "rate": []}
+    results: dict[str, dict[str, list]] = {k: {"lat": [], "rate": [], "cpu": []}
                                            for k in ("estimator", "relay")}
     try:
         for _ in range(args.rounds):
             for kind in ("relay", "estimator"):
-                latencies, rate = measure(kind, env, args.events)
+                latencies, rate, cpu = measure(kind, env, args.events)
                 results[kind]["lat"].append(latencies)
                 results[kind]["rate"].append(rate)
+                results[kind]["cpu"].append(cpu)
     finally:
         rclpy.try_shutdown()
     rows = []
@@ -158,17 +171,19 @@ def main() -> None:
         lat = np.concatenate(results[kind]["lat"])
         rates = results[kind]["rate"]
         rows.append([kind, f"{np.percentile(lat, 50):.0f}", f"{np.percentile(lat, 99):.0f}",
-                     f"{np.median(rates):.0f}", f"{min(rates):.0f}..{max(rates):.0f}"])
+                     f"{np.median(rates):.0f}", f"{min(rates):.0f}..{max(rates):.0f}",
+                     f"{np.median(results[kind]['cpu']) * 1e6:.0f}"])
     est = np.concatenate(results["estimator"]["lat"])
     rel = np.concatenate(results["relay"]["lat"])
     ratio_rate = np.median(results["estimator"]["rate"]) / np.median(results["relay"]["rate"])
     print(f"DDS: {args.rounds} rounds x {args.events} events each, N = 5, "
           f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}")
+    ratio_cpu = np.median(results["relay"]["cpu"]) / np.median(results["estimator"]["cpu"])
     print(table(["node", "latency p50 (us)", "latency p99 (us)", "throughput (events/s, median)",
-                 "throughput range"], rows))
+                 "throughput range", "node CPU per event under load (us)"], rows))
     print(f"estimator / relay: p50 {np.percentile(est, 50) / np.percentile(rel, 50):.2f}, "
           f"p99 {np.percentile(est, 99) / np.percentile(rel, 99):.2f}, "
-          f"throughput {ratio_rate:.2f}")
+          f"throughput {ratio_rate:.2f} (by CPU per event: {ratio_cpu:.2f})")
 
 
 if __name__ == "__main__":

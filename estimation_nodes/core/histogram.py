@@ -17,6 +17,7 @@ Correction (Bayes' rule)::
 from __future__ import annotations
 
 import functools
+import math
 from types import ModuleType
 
 import numpy as np
@@ -151,7 +152,7 @@ def correct(
     """
     # The evidence as a dot product reads both arrays once, without a temporary.
     evidence = float(np.dot(belief, likelihood))
-    if not evidence > 0.0 or not np.isfinite(evidence):
+    if not evidence > 0.0 or not math.isfinite(evidence):
         raise ZeroEvidenceError(
             f"observation has evidence {evidence!r}: every cell of the belief rules it out"
         )
