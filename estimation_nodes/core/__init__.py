@@ -1,4 +1,7 @@
-"""The filters as pure numpy functions over validated models; never imports rclpy."""
+"""The filters as pure functions over validated models (numpy; numba for large worlds).
+
+Never imports rclpy: nodes, replay and tests share it.
+"""
 
 from estimation_nodes.core import histogram, kalman
 from estimation_nodes.core.config import (

@@ -4,13 +4,13 @@ numpy needs five passes over the belief for a histogram step: a cyclically
 padded copy and a convolution for the prediction, then a dot product, a
 product and a scaling for the correction. Here the prediction is one pass
 (shift, wrap and kernel together) and the correction two (numpy's dot for
-the evidence, then product and scaling fused). The results equal numpy's
-to rounding: the correction bit for bit (same operations in the same order),
-the prediction to the order of a 3-term sum.
+the evidence, then product and scaling fused). The results equal numpy's:
+the correction bit for bit (the same operations in the same order), the
+prediction to rounding (the kernel's taps summed in another order).
 
-Importing this module imports numba and compiles (or loads from numba's
-cache) the kernels, which takes a fraction of a second; ``histogram``
-imports it only for worlds large enough to pay that back.
+Importing this module imports numba (about 0.25 s); ``warm_up`` then
+compiles the kernels, or loads them from numba's cache (another 0.25 s).
+``histogram`` does both only for worlds large enough to pay that back.
 """
 
 from __future__ import annotations
