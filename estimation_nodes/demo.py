@@ -182,6 +182,8 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
+    from estimation_nodes.nodes.ros_common import PARENT_PID_ENV
+
     processes: dict[str, subprocess.Popen] = {}
     rclpy.init()
     executor = SingleThreadedExecutor()
@@ -200,7 +202,9 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
                        "--ros-args", "--params-file", str(params)]
             if name == "motion_commander":
                 command += commander_overrides(args.settle, exit_when_done=True)
-            processes[name] = subprocess.Popen(command)
+            # The children end with the demo even if it is killed (ros_common.end_with_parent).
+            processes[name] = subprocess.Popen(
+                command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())})
         commander = processes["motion_commander"]
         finished = spin_until(executor, lambda: any(p.poll() is not None
                                                     for p in processes.values()), deadline)

@@ -19,11 +19,30 @@ REPO = Path(__file__).resolve().parent.parent
 SCENARIOS = REPO / "msgs_config"
 
 
+class _NextDomain:
+    """domain_coordinator's selector, but moving on through 1..100 over the session.
+
+    Its default selector starts from 1 on every call, so consecutive tests all
+    got domain 1: a process or a sample that outlived its test could then reach
+    the next one. Each test now gets the next free domain instead.
+    """
+
+    def __init__(self) -> None:
+        self._next = os.getpid() % 100
+
+    def __call__(self) -> int:
+        self._next += 1
+        return (self._next - 1) % 100 + 1
+
+
+_NEXT_DOMAIN = _NextDomain()
+
+
 @pytest.fixture
 def domain_id():
     from domain_coordinator import domain_id as reserve
 
-    with reserve() as reserved:
+    with reserve(_NEXT_DOMAIN) as reserved:
         yield reserved
 
 
@@ -85,13 +104,22 @@ class Collector:
 
         self.node = Node(name, context=context)
         self.messages: dict[str, list] = defaultdict(list)
+        self.subscriptions = {}
         for topic, spec in topics.items():
             msg_type, qos = spec if isinstance(spec, tuple) else (spec, latched_qos(1000))
-            self.node.create_subscription(
+            self.subscriptions[topic] = self.node.create_subscription(
                 msg_type, topic, lambda msg, t=topic: self.messages[t].append(msg), qos)
 
     def count(self, topic: str) -> int:
         return len(self.messages[topic])
+
+    def unmatched(self) -> list[str]:
+        """Topics whose subscription has not matched a publisher yet."""
+        return [topic for topic, sub in self.subscriptions.items()
+                if sub.get_publisher_count() < 1]
+
+    def all_matched(self) -> bool:
+        return not self.unmatched()
 
 
 @pytest.fixture

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import array
+import ctypes
+import os
+import signal
 import sys
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
@@ -142,6 +145,8 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> i
     """
     name = getattr(node_class, "node_name", node_class.__name__)
     argv = list(sys.argv if args is None else args)
+    if not end_with_parent():
+        return 0
     try:
         for path in params_files_in(argv):
             check_params_file(path)
@@ -167,6 +172,28 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> i
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+#: Set by a parent (estimation_demo) to its pid: the node then ends when that
+#: parent dies, even by SIGKILL, instead of running on as an orphan.
+PARENT_PID_ENV = "ESTIMATION_NODES_PARENT_PID"
+_PR_SET_PDEATHSIG = 1
+
+
+def end_with_parent() -> bool:
+    """Ask Linux for a SIGINT (a clean shutdown) when the parent named in the
+    environment dies. False when that parent is already gone: nothing to run for.
+    Does nothing when run by hand, or off Linux."""
+    expected = os.environ.get(PARENT_PID_ENV)
+    if not expected or not sys.platform.startswith("linux"):
+        return True
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGINT, 0, 0, 0)
+    except (OSError, AttributeError):
+        return True
+    # Checked after prctl: a parent that died before it took effect sends nothing.
+    return str(os.getppid()) == expected
 
 
 def main_for(node_class: Callable[..., Node]) -> Callable[[], None]:

@@ -47,7 +47,7 @@ def test_sensor_restarted_mid_run_estimator_keeps_localizing(
     # start_delay also applies when the commander resumes: time for the new sensor's
     # publishers to be discovered, so its readings are not held and sent late.
     started = start_graph(processes, LOCALIZATION, "-p", "max_commands:=60", "-p",
-                          "rate_hz:=10.0", "-p", "start_delay:=1.5")
+                          "rate_hz:=10.0", "-p", "start_delay:=1.5", listeners=(executor, seen))
     assert spin_until(executor, lambda: seen.count("belief") >= 25
                       and seen.count("true_position") >= 25, 30.0)
     sensor = started["tile_sensor"]
@@ -103,7 +103,7 @@ def test_estimator_killed_and_restarted_comes_back_from_initial_state(
     # seen to take more than 2 s to be matched here (the dead one is still in the
     # others' participant lists until its lease ends).
     started = start_graph(processes, LOCALIZATION, "-p", "max_commands:=90", "-p",
-                          "rate_hz:=10.0")
+                          "rate_hz:=10.0", listeners=(executor, seen))
     assert spin_until(executor, lambda: seen.count("belief") >= 15, 30.0)
     started["estimator"].kill()   # a crash, not a clean stop
     started["estimator"].wait(timeout=10)
