@@ -151,23 +151,32 @@ def children_of(pid: int) -> list[int]:
     return [int(p) for p in path.read_text().split()] if path.exists() else []
 
 
+def running(pid: int) -> bool:
+    """The process exists and is not a zombie waiting to be reaped."""
+    stat = Path(f"/proc/{pid}/stat")
+    return stat.exists() and stat.read_text().rsplit(")", 1)[1].split()[0] != "Z"
+
+
+def start_demo(ros_env, *args, **popen_args) -> tuple[subprocess.Popen, list[int]]:
+    """The demo as a process, once its three nodes are running: (demo, node pids)."""
+    demo = subprocess.Popen([sys.executable, "-m", "estimation_nodes.demo", *args],
+                            env=ros_env, **popen_args)
+    deadline = time.monotonic() + 30
+    while len(children_of(demo.pid)) < 3 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return demo, children_of(demo.pid)
+
+
 def test_demo_ctrl_c_leaves_no_process_behind(ros_env, domain_id):
-    demo = subprocess.Popen(
-        [sys.executable, "-m", "estimation_nodes.demo", "--scenario", "default", "--settle",
-         "0.5"], env=ros_env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    demo, children = start_demo(ros_env, "--scenario", "default", "--settle", "0.5",
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
-        deadline = time.monotonic() + 30
-        while len(children_of(demo.pid)) < 3 and time.monotonic() < deadline:
-            time.sleep(0.1)
-        children = children_of(demo.pid)
         assert len(children) == 3
         demo.send_signal(signal.SIGINT)
         output, _ = demo.communicate(timeout=30)
         assert demo.returncode == 130, output
         assert "summary:" in output
-        for child in children:
-            assert not Path(f"/proc/{child}").exists() or \
-                Path(f"/proc/{child}/stat").read_text().split()[2] == "Z"
+        assert not [child for child in children if running(child)]
     finally:
         if demo.poll() is None:
             demo.kill()
@@ -177,25 +186,16 @@ def test_demo_ctrl_c_leaves_no_process_behind(ros_env, domain_id):
 def test_nodes_end_when_the_demo_is_killed(ros_env):
     # SIGKILL gives the demo no chance to stop its children: they must end on their
     # own rather than run on, publishing into whatever next uses the domain.
-    demo = subprocess.Popen(
-        [sys.executable, "-m", "estimation_nodes.demo", "--scenario", "localization",
-         "--settle", "0.5", "--quiet"], env=ros_env, stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL)
-    try:
-        deadline = time.monotonic() + 30
-        while len(children_of(demo.pid)) < 3 and time.monotonic() < deadline:
-            time.sleep(0.1)
-        children = children_of(demo.pid)
-        assert len(children) == 3
-    finally:
-        demo.kill()
-        demo.wait()
+    demo, children = start_demo(ros_env, "--scenario", "localization", "--settle", "0.5",
+                                "--quiet", stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    demo.kill()
+    demo.wait()
+    assert len(children) == 3
     deadline = time.monotonic() + 20
     alive = children
     while alive and time.monotonic() < deadline:
         time.sleep(0.1)
-        alive = [pid for pid in children if Path(f"/proc/{pid}").exists()
-                 and Path(f"/proc/{pid}/stat").read_text().split()[2] != "Z"]
+        alive = [pid for pid in children if running(pid)]
     for pid in alive:   # end what the failure left behind, by pid
         os.kill(pid, signal.SIGKILL)
     assert not alive, f"orphaned nodes still running: {alive}"
