@@ -6,12 +6,6 @@ import pytest
 from estimation_nodes.core import MotionKernel, compiled, histogram
 
 
-def numpy_predict(belief, u, kernel, monkeypatch):
-    with monkeypatch.context() as patch:
-        patch.setattr(histogram, "COMPILED_MIN_CELLS", np.iinfo(np.int64).max)
-        return histogram.predict(belief, u, kernel)
-
-
 def random_kernel(rng, width):
     weights = rng.random(width)
     return MotionKernel(weights / weights.sum())
@@ -19,7 +13,7 @@ def random_kernel(rng, width):
 
 @pytest.mark.parametrize("size", [1, 2, 3, 5, 7, 31, 64, 1000, histogram.COMPILED_MIN_CELLS + 7])
 @pytest.mark.parametrize("width", [1, 3, 5, 7, 31, 63])
-def test_prediction_equals_numpy_path(size, width, monkeypatch):
+def test_prediction_equals_numpy_path(size, width):
     # Worlds smaller than the kernel, equal to it and far larger; shifts at
     # every edge of the split between the two runs of the output.
     rng = np.random.default_rng(size * 100 + width)
@@ -29,7 +23,7 @@ def test_prediction_equals_numpy_path(size, width, monkeypatch):
     for u in {0, 1, -1, width // 2, size - 1, size, size + 3, -size - 2, 10**15 + 3}:
         predicted = np.empty(size)
         compiled.predict_into(belief, u % size, kernel.weights, predicted)
-        np.testing.assert_allclose(predicted, numpy_predict(belief, u, kernel, monkeypatch),
+        np.testing.assert_allclose(predicted, histogram.predict(belief, u, kernel, compiled=False),
                                    rtol=1e-13, atol=1e-300, err_msg=f"u={u}")
 
 
