@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from timing import compare, format_seconds, table  # noqa: E402
 
 from estimation_nodes.core import LinearGaussianModel, MotionKernel, histogram, kalman  # noqa: E402
-from estimation_nodes.memory import keep_freed_memory  # noqa: E402
+from estimation_nodes.nodes.process_memory import keep_freed_memory  # noqa: E402
 
 
 def book_like_kernel(width: int) -> MotionKernel:

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
-from estimation_nodes.demo import stop_process  # noqa: E402
+from estimation_nodes.tools.graph_runtime import stop_process  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
 WINDOW = 100
@@ -53,7 +53,7 @@ class Driver:
         from rclpy.node import Node
         from std_msgs.msg import String
 
-        from estimation_nodes.nodes.ros_common import INPUT_QOS
+        from estimation_nodes.nodes.qos import INPUT_QOS
 
         self.node = Node(f"bench_driver_{answer_topic}")
         self.executor = SingleThreadedExecutor()
@@ -126,7 +126,7 @@ def cpu_seconds(pid: int) -> float:
 def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float, float]:
     from std_msgs.msg import Float64MultiArray, String
 
-    from estimation_nodes.nodes.ros_common import latched_qos
+    from estimation_nodes.nodes.qos import latched_qos
 
     process = start(kind, env)
     if kind == "estimator":

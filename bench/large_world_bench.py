@@ -27,7 +27,8 @@ from dds_bench import start  # noqa: E402
 from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
-from estimation_nodes.demo import stop_process  # noqa: E402
+from estimation_nodes.tools import graph_runtime  # noqa: E402
+from estimation_nodes.tools.graph_runtime import stop_process  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
 
@@ -91,7 +92,7 @@ def measure(world: Path, env: dict, compiled: bool, args: argparse.Namespace) ->
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray, Int32, String
 
-    from estimation_nodes.nodes.ros_common import INPUT_QOS, latched_qos
+    from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 
     bare = start("relay", env)
     started = time.perf_counter()
@@ -114,11 +115,8 @@ def measure(world: Path, env: dict, compiled: bool, args: argparse.Namespace) ->
     tile = node.create_publisher(String, "tile_observation", INPUT_QOS)
 
     def spin_until(predicate, timeout=120.0):
-        deadline = time.monotonic() + timeout
-        while not predicate():
-            if time.monotonic() > deadline:
-                raise RuntimeError("timed out")
-            executor.spin_once(timeout_sec=0.05)
+        if not graph_runtime.spin_until(executor, predicate, timeout):
+            raise RuntimeError("timed out")
 
     try:
         spin_until(lambda: cmd.get_subscription_count() >= 1

@@ -17,7 +17,13 @@ import time
 
 import numpy as np
 
-from estimation_nodes.core import HistogramModel, LinearGaussianModel, histogram, kalman
+from estimation_nodes.core import (
+    HistogramModel,
+    LinearGaussianModel,
+    histogram,
+    kalman,
+    simulation,
+)
 
 
 def histogram_health(steps: int, seed: int = 1) -> dict:
@@ -27,8 +33,8 @@ def histogram_health(steps: int, seed: int = 1) -> dict:
     belief, position = histogram.uniform(model.size), 0
     worst_sum_error, smallest_max = 0.0, 1.0
     for u in moves.tolist():
-        position += u + histogram.sample_offset(model.kernel, rng)
-        observed = histogram.sample_observation(
+        position += u + simulation.sample_offset(model.kernel, rng)
+        observed = simulation.sample_observation(
             model.sensor.probabilities, model.cell_class_index(position), rng)
         belief = histogram.predict(belief, u, model.kernel)
         belief, _ = histogram.correct(belief, model.likelihood(model.sensor.classes[observed]))

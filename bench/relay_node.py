@@ -10,7 +10,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from std_msgs.msg import String
 
-from estimation_nodes.nodes.ros_common import INPUT_QOS, latched_qos
+from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 
 
 class Relay(Node):

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from estimation_nodes.demo import stop_process  # noqa: E402
+from estimation_nodes.tools.graph_runtime import stop_process  # noqa: E402
 from timing import table  # noqa: E402
 
 PROFILE = Path(__file__).resolve().parent / "fastdds_discovery.xml"
@@ -39,7 +39,7 @@ def one_run() -> dict[str, float]:
     from rclpy.node import Node
     from std_msgs.msg import Float64MultiArray, Int32
 
-    from estimation_nodes.nodes.ros_common import INPUT_QOS, latched_qos
+    from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 
     rclpy.init()
     node = Node("startup_driver")

@@ -9,11 +9,14 @@ from __future__ import annotations
 
 import os
 import subprocess
-import time
 from collections import defaultdict
 from pathlib import Path
 
 import pytest
+
+from estimation_nodes.tools.graph_runtime import spin_until
+
+__all__ = ["spin_until"]
 
 REPO = Path(__file__).resolve().parent.parent
 SCENARIOS = REPO / "msgs_config"
@@ -80,16 +83,6 @@ def executor(context):
         ex.shutdown()
 
 
-def spin_until(executor, predicate, timeout: float) -> bool:
-    """Spin until ``predicate()`` holds or ``timeout`` seconds pass; the predicate's last value."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if predicate():
-            return True
-        executor.spin_once(timeout_sec=0.02)
-    return bool(predicate())
-
-
 class Collector:
     """A test node that records every message on the topics it is given.
 
@@ -100,7 +93,7 @@ class Collector:
     def __init__(self, context, topics: dict, name: str = "test_collector"):
         from rclpy.node import Node
 
-        from estimation_nodes.nodes.ros_common import latched_qos
+        from estimation_nodes.nodes.qos import latched_qos
 
         self.node = Node(name, context=context)
         self.messages: dict[str, list] = defaultdict(list)
@@ -149,7 +142,7 @@ def processes(ros_env):
         return process
 
     yield start
-    from estimation_nodes.demo import stop_process
+    from estimation_nodes.tools.graph_runtime import stop_process
 
     for process in started:
         stop_process(process, grace=10.0)

@@ -21,9 +21,8 @@ import math
 from types import ModuleType
 
 import numpy as np
-import numpy.typing as npt
 
-from estimation_nodes.core.config import FloatArray, MotionKernel
+from estimation_nodes.core.models import FloatArray, MotionKernel
 
 #: Worlds of at least this many cells take the compiled kernels of
 #: ``compiled`` (numba) when numba imports: from here on the passes over
@@ -177,15 +176,3 @@ def entropy(belief: FloatArray) -> float:
     """Shannon entropy of the belief in bits (0: certain; log2 N: uniform)."""
     positive = belief[belief > 0.0]
     return float(-(positive * np.log2(positive)).sum())
-
-
-def sample_offset(kernel: MotionKernel, rng: np.random.Generator) -> int:
-    """Draw where a real move lands relative to its target, as the kernel says."""
-    return int(rng.choice(kernel.offsets, p=kernel.weights))
-
-
-def sample_observation(
-    probabilities: npt.NDArray[np.float64], true_class: int, rng: np.random.Generator
-) -> int:
-    """Draw an observed class index for a tile of class ``true_class``."""
-    return int(rng.choice(probabilities.shape[1], p=probabilities[true_class]))

@@ -16,7 +16,7 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
-from estimation_nodes.core.config import FloatArray, LinearGaussianModel
+from estimation_nodes.core.models import FloatArray, LinearGaussianModel
 
 
 class ScalarEstimate(NamedTuple):
@@ -154,6 +154,11 @@ def correct(
     P_new = I_KC.dot(P).dot(I_KC.T)
     P_new += K.dot(R).dot(K.T)
     return x_new, _symmetric(P_new), K
+
+
+def normalized_innovation_squared_scalar(x: float, var: float, z: float, var_z: float) -> float:
+    """NIS of a scalar measurement: (z - x)^2 / (var + var_z), chi-square with 1 dof."""
+    return (z - x) ** 2 / (var + var_z)
 
 
 def normalized_innovation_squared(

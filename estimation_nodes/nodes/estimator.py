@@ -29,22 +29,24 @@ from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
 
 from estimation_nodes.core import histogram
-from estimation_nodes.memory import keep_freed_memory
-from estimation_nodes.nodes.qos_events import INCOMPATIBLE_QOS, MESSAGE_LOST, SubscriptionEvents
-from estimation_nodes.nodes.ros_common import (
-    INPUT_QOS,
-    ConfigurationError,
-    declare_parameters,
-    latched_qos,
-    main_for,
+from estimation_nodes.core.filter_state import HistogramFilter, KalmanFilter
+from estimation_nodes.nodes.messages import to_multiarray, to_pose_with_covariance
+from estimation_nodes.nodes.parameters import (
+    declare_and_build,
     overlay,
-    parameter_values,
     rejection,
-    to_multiarray,
-    to_pose_with_covariance,
 )
-from estimation_nodes.settings import ESTIMATOR_SPECS, EstimatorSettings, build_estimator_settings
-from estimation_nodes.tracks import HistogramTrack, KalmanTrack
+from estimation_nodes.nodes.process import main_for
+from estimation_nodes.nodes.process_memory import keep_freed_memory
+from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
+from estimation_nodes.nodes.rclpy_internals import (
+    INCOMPATIBLE_QOS,
+    MESSAGE_LOST,
+    SubscriptionEvents,
+)
+from estimation_nodes.params import topics
+from estimation_nodes.params.builders import EstimatorSettings, build_estimator_settings
+from estimation_nodes.params.specs import ESTIMATOR_SPECS
 
 #: Seconds between two warnings about the same kind of rejected message.
 WARN_THROTTLE_S = 5.0
@@ -57,36 +59,34 @@ class Estimator(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.node_name, **kwargs)
-        declare_parameters(self, ESTIMATOR_SPECS)
-        self._values = parameter_values(self, ESTIMATOR_SPECS)
-        try:
-            settings = build_estimator_settings(self._values)
-        except ValueError as error:
-            raise ConfigurationError(str(error)) from None
+        self._values, settings = declare_and_build(self, ESTIMATOR_SPECS, build_estimator_settings)
         self._settings = settings
-        self._pending: EstimatorSettings | None = None
-        self._histogram = HistogramTrack(settings, self._values["compiled_kernels"])
-        self._kalman = KalmanTrack(settings.kalman)
+        self._histogram = HistogramFilter(
+            settings.histogram, settings.initial_belief, self._values["compiled_kernels"])
+        self._kalman = KalmanFilter(settings.kalman.initial, settings.kalman.model)
         self.handled: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self._last_warning: dict[str, float] = {}
+        self._proposed: tuple[dict[str, Any], EstimatorSettings] | None = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._on_parameters_set)
 
         latched = latched_qos(self._values["history_depth"])
-        self._belief_predicted_pub = self._output(Float64MultiArray, "belief_predicted", latched)
-        self._belief_pub = self._output(Float64MultiArray, "belief", latched)
-        self._kalman_pub = self._output(PoseWithCovariance, "kalman_estimate", latched)
+        self._belief_predicted_pub = self._output(
+            Float64MultiArray, topics.BELIEF_PREDICTED, latched)
+        self._belief_pub = self._output(Float64MultiArray, topics.BELIEF, latched)
+        self._kalman_pub = self._output(PoseWithCovariance, topics.KALMAN_ESTIMATE, latched)
         self._kalman_stamped_pub = self._output(
-            PoseWithCovarianceStamped, "kalman_estimate_stamped", latched)
+            PoseWithCovarianceStamped, topics.KALMAN_ESTIMATE_STAMPED, latched)
         self._diagnostics_pub = self._output(DiagnosticArray, "/diagnostics", 10)
         # motion_cmd first: when a command and the reading it caused are ready
         # together, the executor takes them in subscription order.
         self.qos_incompatible: Counter[str] = Counter()
         self._input_events = SubscriptionEvents(self.default_callback_group)
         for msg_type, topic, callback in (
-            (Int32, "motion_cmd", self._on_motion_cmd),
-            (String, "tile_observation", self._on_tile_observation),
-            (Float64, "position_measurement", self._on_position_measurement),
+            (Int32, topics.MOTION_CMD, self._on_motion_cmd),
+            (String, topics.TILE_OBSERVATION, self._on_tile_observation),
+            (Float64, topics.POSITION_MEASUREMENT, self._on_position_measurement),
         ):
             subscription = self.create_subscription(
                 msg_type, topic, callback, INPUT_QOS,
@@ -103,37 +103,38 @@ class Estimator(Node):
     # --- parameters -------------------------------------------------------------------------
 
     def _on_set_parameters(self, changes: list[Parameter]) -> SetParametersResult:
-        """Validate the whole proposed configuration; apply it at the next event."""
+        """Validate the whole proposed configuration; rclpy then sets it or refuses it."""
         proposed = overlay(self._values, changes)
-        latest = self._pending or self._settings
         try:
-            settings = build_estimator_settings(proposed, previous=(self._values, latest))
+            settings = build_estimator_settings(proposed, previous=(self._values, self._settings))
         except ValueError as error:
             return rejection(str(error))
-        self._values = proposed
-        self._pending = settings
+        self._proposed = (proposed, settings)
         return SetParametersResult(successful=True)
 
-    def _apply_pending_settings(self) -> None:
-        if self._pending is None:
+    def _on_parameters_set(self, _changes: list[Parameter]) -> None:
+        """The one place a parameter change takes effect: right after rclpy has set it.
+
+        Callbacks of one node never run concurrently here (one executor, one
+        callback group), so no event sees a half-applied configuration.
+        """
+        if self._proposed is None:
             return
-        settings, self._pending = self._pending, None
+        (self._values, settings), self._proposed = self._proposed, None
         self._settings = settings
-        if self._histogram.reconfigure(settings):
+        if self._histogram.reconfigure(settings.histogram, settings.initial_belief):
             self.get_logger().info("new world size or prior: histogram belief reset")
-        self._kalman.reconfigure(settings.kalman)
+        self._kalman.reconfigure(settings.kalman.initial, settings.kalman.model)
 
     # --- events -----------------------------------------------------------------------------
 
     def _on_motion_cmd(self, msg: Int32) -> None:
-        self._apply_pending_settings()
         self._histogram.predict(msg.data)
         self._kalman.predict(float(msg.data))
         self.handled["motion_cmd"] += 1
         self._belief_predicted_pub.publish(to_multiarray(self._histogram.belief, "cells"))
 
     def _on_tile_observation(self, msg: String) -> None:
-        self._apply_pending_settings()
         try:
             self._histogram.correct(msg.data)
         except histogram.ZeroEvidenceError as error:
@@ -146,7 +147,6 @@ class Estimator(Node):
         self._belief_pub.publish(to_multiarray(self._histogram.belief, "cells"))
 
     def _on_position_measurement(self, msg: Float64) -> None:
-        self._apply_pending_settings()
         try:
             estimate = self._kalman.correct(msg.data)
         except ValueError as error:
@@ -162,7 +162,6 @@ class Estimator(Node):
         self._kalman_stamped_pub.publish(stamped)
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        self._apply_pending_settings()
         self._histogram.reset()
         self._kalman.reset()
         self.handled["reset"] += 1
@@ -175,7 +174,7 @@ class Estimator(Node):
     # each iteration, whether or not it fires: rclpy gives each publisher and
     # subscription two by default, 21 in all for this node, which made an idle
     # spin 257 us instead of 138 us for a one-subscription node. Only the events
-    # worth it are kept, the inputs' six in one waitable (qos_events.py; figures
+    # worth it are kept, the inputs' six in one waitable (rclpy_internals.py; figures
     # in bench/README.md).
 
     def _output(self, msg_type: type, topic: str, qos: Any):
@@ -249,9 +248,10 @@ class Estimator(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    # A process-wide choice, so it is made here and not in the node: see memory.py.
+    # A process-wide choice, so it is made here and not in the node: see process_memory.py.
     keep_freed_memory()
     main_for(Estimator)(args)
+
 
 if __name__ == "__main__":
     main()

@@ -18,32 +18,14 @@ from typing import Any
 from rclpy.node import Node
 from std_msgs.msg import Int32
 
-from estimation_nodes.nodes.ros_common import (
-    INPUT_QOS,
-    ConfigurationError,
-    declare_parameters,
-    main_for,
-    parameter_values,
+from estimation_nodes.nodes.parameters import (
+    declare_and_build,
 )
-from estimation_nodes.settings import ParamSpec
-
-COMMANDER_SPECS = (
-    ParamSpec("commands", [1], "Motion commands to publish, in cells (positive: index + u).",
-              read_only=True),
-    ParamSpec("rate_hz", 2.0, "Commands per second.", read_only=True,
-              min_value=0.001, max_value=100000.0),
-    ParamSpec("repeat", False, "Start the sequence again after its last command.",
-              read_only=True),
-    ParamSpec("max_commands", 0, "Stop after this many commands in all (0: no limit).",
-              read_only=True, min_value=0, max_value=2**31 - 1),
-    ParamSpec("required_subscribers", 2, "Matched subscriptions on motion_cmd to wait for "
-              "before the first command.", read_only=True, min_value=0, max_value=1000),
-    ParamSpec("start_delay", 1.0, "Seconds to wait after the subscribers are there, so the "
-              "rest of the graph can discover itself.", read_only=True,
-              min_value=0.0, max_value=3600.0),
-    ParamSpec("exit_when_done", False, "End the process after the last command instead of "
-              "staying up.", read_only=True),
-)
+from estimation_nodes.nodes.process import main_for
+from estimation_nodes.nodes.qos import INPUT_QOS
+from estimation_nodes.params import topics
+from estimation_nodes.params.builders import build_commander_settings
+from estimation_nodes.params.specs import COMMANDER_SPECS
 
 #: How often the commander checks for subscribers while it waits.
 POLL_PERIOD_S = 0.05
@@ -56,16 +38,13 @@ class MotionCommander(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.node_name, **kwargs)
-        declare_parameters(self, COMMANDER_SPECS)
-        values = parameter_values(self, COMMANDER_SPECS)
-        self._commands = list(values["commands"])
-        if not self._commands:
-            raise ConfigurationError("commands: expected at least one command, got []")
+        values, settings = declare_and_build(self, COMMANDER_SPECS, build_commander_settings)
+        self._commands = settings.commands
+        self._limit = settings.limit
         self._values = values
-        self._limit = self._command_limit()
         self._sent = 0
         self._ready_since: float | None = None
-        self._publisher = self.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+        self._publisher = self.create_publisher(Int32, topics.MOTION_CMD, INPUT_QOS)
         self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
         self.get_logger().info(
             f"waiting for {values['required_subscribers']} subscribers on "
@@ -80,13 +59,6 @@ class MotionCommander(Node):
     def sent(self) -> int:
         """Commands published so far."""
         return self._sent
-
-    def _command_limit(self) -> int | None:
-        """How many commands to send in all; None for endless."""
-        limit = self._values["max_commands"] or None
-        if self._values["repeat"]:
-            return limit
-        return min(limit or len(self._commands), len(self._commands))
 
     def _wait_for_graph(self) -> None:
         if self._publisher.get_subscription_count() < self._values["required_subscribers"]:
@@ -114,7 +86,7 @@ class MotionCommander(Node):
             self._ready_since = None
             self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
             return
-        command = int(self._commands[self._sent % len(self._commands)])
+        command = self._commands[self._sent % len(self._commands)]
         self._publisher.publish(Int32(data=command))
         self._sent += 1
 

@@ -9,7 +9,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Float64, Float64MultiArray, Int32, Int64, String
 
 from estimation_nodes.core import HistogramModel, histogram
-from estimation_nodes.nodes.ros_common import INPUT_QOS
+from estimation_nodes.nodes.qos import INPUT_QOS
 from tests.conftest import SCENARIOS, spin_until
 from tests.graph.graph_tools import (
     beliefs,

@@ -15,7 +15,7 @@ from geometry_msgs.msg import PoseWithCovariance
 from std_msgs.msg import Float64MultiArray, Int64, String
 
 from estimation_nodes.core import HistogramModel, histogram
-from estimation_nodes.nodes.ros_common import INPUT_QOS
+from estimation_nodes.nodes.qos import INPUT_QOS
 from tests.conftest import SCENARIOS, spin_until
 from tests.graph.graph_tools import beliefs, executable, start_graph, wait_for_commander
 
@@ -159,7 +159,7 @@ def running(pid: int) -> bool:
 
 def start_demo(ros_env, *args, **popen_args) -> tuple[subprocess.Popen, list[int]]:
     """The demo as a process, once its three nodes are running: (demo, node pids)."""
-    demo = subprocess.Popen([sys.executable, "-m", "estimation_nodes.demo", *args],
+    demo = subprocess.Popen([sys.executable, "-m", "estimation_nodes.tools.demo", *args],
                             env=ros_env, **popen_args)
     deadline = time.monotonic() + 30
     while len(children_of(demo.pid)) < 3 and time.monotonic() < deadline:

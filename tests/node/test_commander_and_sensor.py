@@ -5,9 +5,10 @@ import pytest
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Int32, Int64, String
 
-from estimation_nodes.core import HistogramModel, histogram
+from estimation_nodes.core import HistogramModel, simulation
 from estimation_nodes.nodes.motion_commander import MotionCommander
-from estimation_nodes.nodes.ros_common import INPUT_QOS, ConfigurationError
+from estimation_nodes.nodes.parameters import ConfigurationError
+from estimation_nodes.nodes.qos import INPUT_QOS
 from estimation_nodes.nodes.tile_sensor import TileSensor
 from tests.conftest import spin_until
 
@@ -72,8 +73,8 @@ def test_seeded_sensor_is_reproducible_and_follows_the_models(context, executor,
     # The same draws, made here with the core's samplers, give the same run.
     model, rng, position = HistogramModel.book(), np.random.default_rng(11), 0
     for step in range(20):
-        position += 1 + histogram.sample_offset(model.kernel, rng)
-        observed = histogram.sample_observation(model.sensor.probabilities,
+        position += 1 + simulation.sample_offset(model.kernel, rng)
+        observed = simulation.sample_observation(model.sensor.probabilities,
                                                 model.cell_class_index(position), rng)
         z = position + 0.5 * rng.standard_normal()
         assert got["true_position"][step].data == position

@@ -11,7 +11,8 @@ from std_srvs.srv import Trigger
 
 from estimation_nodes.core import HistogramModel, histogram
 from estimation_nodes.nodes.estimator import Estimator
-from estimation_nodes.nodes.ros_common import INPUT_QOS, ConfigurationError
+from estimation_nodes.nodes.parameters import ConfigurationError
+from estimation_nodes.nodes.qos import INPUT_QOS
 from tests.conftest import spin_until
 
 OUTPUTS = {
@@ -226,12 +227,12 @@ def test_kalman_change_reuses_the_histogram_model_and_a_world_change_rebuilds_it
     model = d.estimator._settings.histogram
     [result] = d.estimator.set_parameters([Parameter("kalman.var_z", value=9.0)])
     assert result.successful
-    assert d.estimator._pending.histogram is model
-    assert d.estimator._pending.kalman.scalar.var_z == 9.0
+    assert d.estimator._settings.histogram is model
+    assert d.estimator._settings.kalman.model.var_z == 9.0
     [result] = d.estimator.set_parameters([Parameter("motion_kernel", value=[0.2, 0.6, 0.2])])
     assert result.successful
-    assert d.estimator._pending.histogram is not model
-    np.testing.assert_array_equal(d.estimator._pending.histogram.kernel.weights,
+    assert d.estimator._settings.histogram is not model
+    np.testing.assert_array_equal(d.estimator._settings.histogram.kernel.weights,
                                   [0.2, 0.6, 0.2])
 
 

@@ -5,7 +5,7 @@ import pytest
 
 from estimation_nodes.core import (GaussianState, HistogramModel, LinearGaussianModel,
                                    MotionKernel, ScalarKalmanModel, SensorModel)
-from estimation_nodes.core.config import BOOK_CLASSES, BOOK_KERNEL, BOOK_SENSOR_MODEL, \
+from estimation_nodes.core.models import BOOK_CLASSES, BOOK_KERNEL, BOOK_SENSOR_MODEL, \
     BOOK_WORLD, check_belief
 
 
@@ -117,7 +117,8 @@ def test_models_are_immutable():
 
 
 def test_world_file_replaces_world(tmp_path):
-    from estimation_nodes.settings import ESTIMATOR_SPECS, build_histogram_model, spec_defaults
+    from estimation_nodes.params.builders import build_histogram_model
+    from estimation_nodes.params.specs import ESTIMATOR_SPECS, spec_defaults
 
     path = tmp_path / "world.txt"
     path.write_text("dark bright\nbright  dark\n")
@@ -135,7 +136,8 @@ def test_world_file_replaces_world(tmp_path):
     (b"\xff\xfe", "cannot read"),
 ])
 def test_world_file_errors(tmp_path, content, message):
-    from estimation_nodes.settings import ESTIMATOR_SPECS, build_histogram_model, spec_defaults
+    from estimation_nodes.params.builders import build_histogram_model
+    from estimation_nodes.params.specs import ESTIMATOR_SPECS, spec_defaults
 
     path = tmp_path / "world.txt"
     if isinstance(content, bytes):

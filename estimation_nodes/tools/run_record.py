@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimation_nodes.core.config import FloatArray
+from estimation_nodes.core.models import FloatArray
+from estimation_nodes.params import topics
 
 
 @dataclass
@@ -30,8 +31,8 @@ class RunRecord:
 
     def add_event(self, topic: str, value: object) -> None:
         """Keep an input both in its topic's list and in the common event order."""
-        {"motion_cmd": self.commands, "tile_observation": self.observations,
-         "position_measurement": self.measurements}[topic].append(value)
+        {topics.MOTION_CMD: self.commands, topics.TILE_OBSERVATION: self.observations,
+         topics.POSITION_MEASUREMENT: self.measurements}[topic].append(value)
         self.events.append((topic, value))
 
     @property

@@ -14,12 +14,12 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
-from estimation_nodes.nodes.ros_common import INPUT_QOS, latched_qos
-from estimation_nodes.recording import TOPIC_TYPES, McapRunWriter
-from estimation_nodes.run_record import RunRecord
+from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
+from estimation_nodes.params import topics
+from estimation_nodes.tools.recording import McapRunWriter
+from estimation_nodes.tools.run_record import RunRecord
 
 BARS = " ▁▂▃▄▅▆▇█"
-INPUTS = ("motion_cmd", "tile_observation", "position_measurement")
 
 
 def message_class(type_name: str) -> type:
@@ -49,19 +49,19 @@ class RunMonitor(Node):
         self.record = RunRecord()
         self._quiet = quiet
         self._writer = writer
-        self._types = {topic: message_class(name) for topic, name in TOPIC_TYPES.items()}
+        self._types = {topic: message_class(name) for topic, name in topics.TOPIC_TYPES.items()}
         handlers: dict[str, Callable[[object], None]] = {
-            "true_position": lambda msg: self.record.truth.append(msg.data),
-            "belief_predicted": self._on_predicted,
-            "belief": self._on_corrected,
-            "kalman_estimate": self._on_kalman,
-            "kalman_estimate_stamped": lambda msg: None,
+            topics.TRUE_POSITION: lambda msg: self.record.truth.append(msg.data),
+            topics.BELIEF_PREDICTED: self._on_predicted,
+            topics.BELIEF: self._on_corrected,
+            topics.KALMAN_ESTIMATE: self._on_kalman,
+            topics.KALMAN_ESTIMATE_STAMPED: lambda msg: None,
         }
-        for topic in INPUTS:
+        for topic in topics.INPUTS:
             handlers[topic] = lambda msg, t=topic: self.record.add_event(t, msg.data)
         self._subscriptions_by_topic = {}
         for topic, msg_type in self._types.items():
-            qos = INPUT_QOS if topic in INPUTS else latched_qos(1000)
+            qos = INPUT_QOS if topic in topics.INPUTS else latched_qos(1000)
             self._subscriptions_by_topic[topic] = self.create_subscription(
                 msg_type, topic, self._raw_handler(topic, handlers[topic]), qos, raw=True)
 

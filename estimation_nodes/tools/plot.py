@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation_nodes.run_record import RunRecord
+from estimation_nodes.tools.run_record import RunRecord
 
 #: Pixel size of every picture: 16 x 12 inches at 100 dpi.
 FIGURE_INCHES = (16.0, 12.0)
@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("recording", type=Path, help="an MCAP file from estimation_demo --record")
     parser.add_argument("--output", "-o", type=Path, required=True, help="PNG file to write")
     args = parser.parse_args(argv)
-    from estimation_nodes.recording import RecordingError, read_recording
+    from estimation_nodes.tools.recording import RecordingError, read_recording
 
     try:
         record = read_recording(args.recording).record

@@ -1,7 +1,8 @@
-"""The nodes' parameters: one table of specs, and builders from values to core models.
+"""Builders from parameter values to validated core models, one per node.
 
 Nothing here imports rclpy, so the same validation runs at start-up, on every
-runtime parameter change, in offline tools and in plain unit tests.
+runtime parameter change, in offline tools and in plain unit tests. Every
+error is a ``ValueError`` whose message starts with the parameter's name.
 """
 
 from __future__ import annotations
@@ -13,95 +14,19 @@ from typing import Any
 
 import numpy as np
 
-from estimation_nodes.core import GaussianState, HistogramModel, LinearGaussianModel, histogram
-from estimation_nodes.core.config import (
-    BOOK_CLASSES,
-    BOOK_KERNEL,
-    BOOK_SENSOR_MODEL,
-    BOOK_WORLD,
+from estimation_nodes.core import histogram
+from estimation_nodes.core.models import (
     FloatArray,
+    GaussianState,
+    HistogramModel,
+    LinearGaussianModel,
     ScalarKalmanModel,
     as_finite_array,
     check_belief,
     check_finite,
     check_positive,
 )
-
-#: Marks a parameter with no default: declared by type, unset means "not given".
-UNSET = None
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One parameter: name, default (or the type name when it has none), description."""
-
-    name: str
-    default: Any
-    description: str
-    read_only: bool = False
-    #: For parameters without a default: one of "string_array", "double_array".
-    type_name: str = ""
-    #: Inclusive bounds shown by `ros2 param describe` (numbers only).
-    min_value: float | None = None
-    max_value: float | None = None
-
-
-WORLD_SPECS = (
-    ParamSpec("world", list(BOOK_WORLD),
-              "Class name of each cell of the cyclic world, in order (index 0 first)."),
-    ParamSpec("world_file", "",
-              "Path of a UTF-8 text file with the class name of each cell, separated by white "
-              "space; when set it replaces 'world' (for large worlds).", read_only=True),
-    ParamSpec("classes", list(BOOK_CLASSES), "Names of the tile classes the sensor reports."),
-    ParamSpec("sensor_model", [p for row in BOOK_SENSOR_MODEL for p in row],
-              "p(observed class | true class), row-major: one row per true class in the "
-              "order of 'classes', one column per observed class; rows sum to 1."),
-    ParamSpec("motion_kernel", list(BOOK_KERNEL),
-              "Probabilities of landing at offsets -k..k around the commanded target "
-              "(odd length, centred, sums to 1)."),
-)
-
-ESTIMATOR_SPECS = WORLD_SPECS + (
-    ParamSpec("initial_belief", UNSET,
-              "Prior over the cells (normalized); leave unset for a uniform prior.",
-              type_name="double_array"),
-    ParamSpec("kalman.mode", "scalar",
-              "'scalar': the book's Algorithm 4 with kalman.x0/P0/var_u/var_z; 'matrix': "
-              "the matrix filter with kalman.matrix.*.", read_only=True),
-    ParamSpec("kalman.x0", 0.0, "Initial position estimate (cells) of the scalar filter."),
-    ParamSpec("kalman.P0", 100.0, "Initial variance of the scalar filter (> 0).",),
-    ParamSpec("kalman.var_u", 2.0, "Variance of an executed move (> 0)."),
-    ParamSpec("kalman.var_z", 4.0, "Variance of a position measurement (> 0)."),
-    ParamSpec("kalman.matrix.x0", [0.0], "Matrix mode: initial state; its length n sets the "
-              "state size. Component 0 is published as the position."),
-    ParamSpec("kalman.matrix.P0", [100.0], "Matrix mode: initial covariance, n x n row-major."),
-    ParamSpec("kalman.matrix.A", [1.0], "Matrix mode: transition matrix A, n x n row-major."),
-    ParamSpec("kalman.matrix.B", [1.0], "Matrix mode: input matrix B, n x 1 (u is the "
-              "motion command)."),
-    ParamSpec("kalman.matrix.C", [1.0], "Matrix mode: measurement matrix C, 1 x n."),
-    ParamSpec("kalman.matrix.F", [1.0], "Matrix mode: noise-input matrix F, n x q row-major."),
-    ParamSpec("kalman.matrix.Q", [2.0], "Matrix mode: process noise covariance, q x q."),
-    ParamSpec("kalman.matrix.R", [4.0], "Matrix mode: measurement noise variance, 1 x 1."),
-    ParamSpec("frame_id", "map", "frame_id of kalman_estimate_stamped."),
-    ParamSpec("history_depth", 100,
-              "How many past estimates each output topic keeps for late subscribers "
-              "(transient_local). Lower it for very large worlds.", read_only=True,
-              min_value=1, max_value=100000),
-    ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics messages.",
-              read_only=True, min_value=0.01, max_value=3600.0),
-    ParamSpec("compiled_kernels", False,
-              "Worlds of 65,536 cells or more: run the histogram steps as numba-compiled "
-              "kernels (a 1e6-cell step in about half the CPU time) at the price of 100 to "
-              "150 MB of resident memory for numba and LLVM and 0.5 s more start-up. Off by "
-              "default: a step through DDS at 1e6 cells is dominated by moving the two "
-              "belief messages, so the node's end-to-end rate does not change measurably.",
-              read_only=True),
-)
-
-
-def spec_defaults(specs: tuple[ParamSpec, ...]) -> dict[str, Any]:
-    """Every parameter's default, by name (UNSET for those without one)."""
-    return {spec.name: spec.default for spec in specs}
+from estimation_nodes.params.specs import UNSET, WORLD_SPECS
 
 
 def as_list(name: str, value: Any) -> list:
@@ -157,12 +82,15 @@ def _matrix(name: str, flat: Any, rows: int) -> FloatArray:
 
 @dataclass(frozen=True)
 class KalmanSettings:
-    """Which Kalman filter the estimator runs and from where it starts."""
+    """Which Kalman filter the estimator runs (the model's type says) and where it starts."""
 
-    mode: str
     initial: GaussianState
-    scalar: ScalarKalmanModel | None
-    matrix: LinearGaussianModel | None
+    model: ScalarKalmanModel | LinearGaussianModel
+
+    @property
+    def mode(self) -> str:
+        """'scalar' (the book's Algorithm 4) or 'matrix'."""
+        return "scalar" if isinstance(self.model, ScalarKalmanModel) else "matrix"
 
 
 def build_kalman_settings(values: Mapping[str, Any]) -> KalmanSettings:
@@ -177,10 +105,9 @@ def build_kalman_settings(values: Mapping[str, Any]) -> KalmanSettings:
     scalar = ScalarKalmanModel(values["kalman.var_u"], values["kalman.var_z"])
     matrix_initial, matrix = _build_matrix_model(values, "kalman.matrix.")
     if mode == "scalar":
-        initial = GaussianState(np.array([x0]), np.array([[P0]]))
-        return KalmanSettings(mode, initial, scalar, None)
+        return KalmanSettings(GaussianState(np.array([x0]), np.array([[P0]])), scalar)
     if mode == "matrix":
-        return KalmanSettings(mode, matrix_initial, None, matrix)
+        return KalmanSettings(matrix_initial, matrix)
     raise ValueError(f"kalman.mode: expected 'scalar' or 'matrix', got {mode!r}")
 
 
@@ -248,3 +175,51 @@ def build_estimator_settings(
         model = build_histogram_model(values)
         initial_belief = build_initial_belief(values, model.size)
     return EstimatorSettings(model, initial_belief, build_kalman_settings(values))
+
+
+@dataclass(frozen=True)
+class SensorSettings:
+    """The simulated sensor's world and noise, and its script when it replays one."""
+
+    model: HistogramModel
+    noise_std: float
+    scripted_observations: tuple[str, ...]
+    scripted_measurements: tuple[float, ...]
+
+    @property
+    def scripted(self) -> bool:
+        """Whether the sensor replays a script instead of sampling."""
+        return bool(self.scripted_observations or self.scripted_measurements)
+
+
+def build_sensor_settings(values: Mapping[str, Any]) -> SensorSettings:
+    """The tile sensor's settings; scripted classes must be classes of the model."""
+    model = build_histogram_model(values)
+    noise_std = float(np.sqrt(check_positive(
+        "measurement_variance", values["measurement_variance"])))
+    observations = tuple(values["scripted_observations"] or ())
+    for name in observations:
+        try:
+            model.sensor.index_of(name)
+        except ValueError as error:
+            raise ValueError(f"scripted_observations: {error}") from None
+    measurements = tuple(check_finite("scripted_measurements", z)
+                         for z in values["scripted_measurements"] or ())
+    return SensorSettings(model, noise_std, observations, measurements)
+
+
+@dataclass(frozen=True)
+class CommanderSettings:
+    """The motion commander's sequence and how many commands a run sends."""
+
+    commands: tuple[int, ...]
+    #: Commands to send in all; None repeats without end.
+    limit: int | None
+
+
+def build_commander_settings(values: Mapping[str, Any]) -> CommanderSettings:
+    commands = tuple(int(c) for c in as_list("commands", values["commands"]))
+    limit = values["max_commands"] or None
+    if not values["repeat"]:
+        limit = min(limit or len(commands), len(commands))
+    return CommanderSettings(commands, limit)

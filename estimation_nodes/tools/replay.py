@@ -3,7 +3,7 @@
     estimation_replay RUN.mcap [--params-file FILE] [--tolerance 1e-9]
 
 The recording's inputs (motion_cmd, tile_observation, position_measurement,
-in the order they were published) go through the same tracks the estimator uses, built from
+in the order they were published) go through the same filters the estimator uses, built from
 the parameters stored in the recording (or a file you give). Each offline
 estimate is compared with the estimate recorded online, in order, topic by
 topic. Exit 0 when all agree to the tolerance, 1 otherwise, with each
@@ -23,12 +23,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import yaml
 
-from estimation_nodes.params_files import check_params_file
-from estimation_nodes.recording import Recording, RecordingError, read_recording
-from estimation_nodes.settings import ESTIMATOR_SPECS, build_estimator_settings, spec_defaults
-from estimation_nodes.tracks import HistogramTrack, KalmanTrack
+from estimation_nodes.core.filter_state import HistogramFilter, KalmanFilter
+from estimation_nodes.params import topics
+from estimation_nodes.params.builders import build_estimator_settings
+from estimation_nodes.params.files import check_params_file, read_node_parameters
+from estimation_nodes.params.specs import ESTIMATOR_SPECS, spec_defaults
+from estimation_nodes.tools.recording import Recording, RecordingError, read_recording
 
 
 @dataclass
@@ -59,26 +60,21 @@ class Comparison:
                 f"    offline {np.array2string(offline, precision=9, threshold=12)}")
 
 
-def estimator_values(parameters_yaml: str) -> dict:
-    """The estimator's parameter values: defaults, then the file's /estimator section."""
+def estimator_values(parameters_yaml: str, node: str = "/estimator") -> dict:
+    """The values the estimator named ``node`` (fully qualified) gets: its defaults, then
+    every section of the file that applies to it, as rcl applies them."""
     values = spec_defaults(ESTIMATOR_SPECS)
-    document = yaml.safe_load(parameters_yaml) or {}
-    # "/estimator", "/**/estimator" and "/robot1/estimator" all name the estimator.
-    section = next((v for k, v in document.items() if k.strip("/").split("/")[-1]
-                    == "estimator"), {})
-    values.update(_flatten(section.get("ros__parameters", {})))
+    values.update(read_node_parameters(parameters_yaml, node))
     return values
 
 
-def _flatten(parameters: dict, prefix: str = "") -> dict:
-    """Nested YAML (kalman: {x0: 3}) to ROS parameter names (kalman.x0)."""
-    flat = {}
-    for key, value in parameters.items():
-        if isinstance(value, dict):
-            flat.update(_flatten(value, f"{prefix}{key}."))
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
+def estimator_name(recording: Recording) -> str:
+    """The recorded estimator's fully qualified name, from the namespace of its belief topic."""
+    for topic in recording.counts:
+        namespace, _, base = topic.rpartition("/")
+        if base == topics.BELIEF:
+            return f"{namespace}/estimator"
+    return "/estimator"
 
 
 def _at(sequence: list, index: int):
@@ -86,34 +82,36 @@ def _at(sequence: list, index: int):
 
 
 def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comparison:
-    """Run the tracks over the recorded inputs; compare every estimate with the recorded one."""
-    values = estimator_values(parameters_yaml)
+    """Run the filters over the recorded inputs; compare every estimate with the recorded one."""
+    values = estimator_values(parameters_yaml, estimator_name(recording))
     settings = build_estimator_settings(values)
     # The same code path as the recorded estimator: both are exact only to rounding.
-    belief = HistogramTrack(settings, values["compiled_kernels"])
-    kalman = KalmanTrack(settings.kalman)
+    belief = HistogramFilter(
+        settings.histogram, settings.initial_belief, values["compiled_kernels"])
+    kalman = KalmanFilter(settings.kalman.initial, settings.kalman.model)
     run = recording.record
     comparison = Comparison()
-    counts = {"belief_predicted": 0, "belief": 0, "kalman_estimate": 0}
+    counts = {topics.BELIEF_PREDICTED: 0, topics.BELIEF: 0, topics.KALMAN_ESTIMATE: 0}
     for topic, value in run.events:
         try:
-            if topic == "motion_cmd":
+            if topic == topics.MOTION_CMD:
                 belief.predict(value)
                 kalman.predict(float(value))
-                output, online, offline = "belief_predicted", run.predicted, belief.belief
-            elif topic == "tile_observation":
+                output, online, offline = topics.BELIEF_PREDICTED, run.predicted, belief.belief
+            elif topic == topics.TILE_OBSERVATION:
                 belief.correct(value)
-                output, online, offline = "belief", run.corrected, belief.belief
+                output, online, offline = topics.BELIEF, run.corrected, belief.belief
             else:
                 estimate = kalman.correct(value)
-                output, online, offline = "kalman_estimate", run.kalman, tuple(estimate)
+                output, online, offline = topics.KALMAN_ESTIMATE, run.kalman, tuple(estimate)
         except ValueError:
             continue   # the estimator rejected it too, and published nothing
         index = counts[output]
         counts[output] += 1
         comparison.check(output, index, _at(online, index), offline, tolerance)
-    for output, online in (("belief_predicted", run.predicted), ("belief", run.corrected),
-                           ("kalman_estimate", run.kalman)):
+    recorded = ((topics.BELIEF_PREDICTED, run.predicted), (topics.BELIEF, run.corrected),
+                (topics.KALMAN_ESTIMATE, run.kalman))
+    for output, online in recorded:
         for index in range(counts[output], len(online)):
             comparison.differences.append(
                 f"{output} #{index + 1}: recorded online, no input to compute it offline")

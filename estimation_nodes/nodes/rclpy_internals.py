@@ -1,10 +1,23 @@
-"""QoS events of several subscriptions, watched by one waitable.
+"""Everything this package takes from rclpy's private API, in one place.
 
-rclpy makes every QoS event handler a Python waitable of its own, and its
-executor visits each waitable on every iteration, ready or not: counting,
-entering, adding to the wait set, checking. For the estimator's six input
-events (message lost and incompatible QoS on three inputs) that was about a
-sixth of its throughput under load (bench/README.md). One waitable holding
+rclpy (Jazzy, 7.1.x) keeps these out of its public API, so a later rclpy may
+change them; tests/node/test_rclpy_internals.py checks each one this module
+uses and fails with a message naming it. What is used and why:
+
+- ``RCLError`` (``rclpy._rclpy_pybind11``): what ``rclpy.init`` raises for a bad
+  command line or parameter file; caught to print one line instead of a trace.
+- ``EventHandle``, ``wait_set.add_event`` / ``is_ready("event", ...)`` and
+  ``take_event``: to watch the estimator's input QoS events in one waitable
+  (below). Keep this only while it measurably pays (bench/README.md, "idle
+  spin"); rclpy's public ``SubscriptionEventCallbacks`` does the same work
+  with one waitable per event.
+
+Why one waitable for the QoS events: rclpy makes every QoS event handler a
+Python waitable of its own, and its executor visits each waitable on every
+iteration, ready or not: counting, entering, adding to the wait set,
+checking. For the estimator's six input events (message lost and
+incompatible QoS on three inputs) that was about a sixth of its throughput
+under load (bench/README.md). One waitable holding
 all six event handles pays the executor's per-waitable cost once; the
 handles themselves are the same rcl events rclpy's own handlers use.
 """
@@ -17,12 +30,15 @@ from typing import Any, Callable
 from rclpy.callback_groups import CallbackGroup
 from rclpy.event_handler import QoSSubscriptionEventType
 from rclpy.executors import await_or_execute
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.subscription import Subscription
 from rclpy.waitable import NumberOfEntities, Waitable
 
 MESSAGE_LOST = QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST
 INCOMPATIBLE_QOS = QoSSubscriptionEventType.RCL_SUBSCRIPTION_REQUESTED_INCOMPATIBLE_QOS
+
+__all__ = ["INCOMPATIBLE_QOS", "MESSAGE_LOST", "RCLError", "SubscriptionEvents"]
 
 
 class SubscriptionEvents(Waitable):

@@ -9,27 +9,16 @@ nothing but the file. Needs the ``record`` extra (mcap, mcap-ros2-support).
 
 from __future__ import annotations
 
-import os
 import re
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from estimation_nodes.run_record import RunRecord
+from estimation_nodes.params import topics
+from estimation_nodes.tools.installed import share_dirs
+from estimation_nodes.tools.run_record import RunRecord
 
-#: Every topic of a run: relative name -> ROS type.
-TOPIC_TYPES = {
-    "motion_cmd": "std_msgs/msg/Int32",
-    "tile_observation": "std_msgs/msg/String",
-    "position_measurement": "std_msgs/msg/Float64",
-    "true_position": "std_msgs/msg/Int64",
-    "belief_predicted": "std_msgs/msg/Float64MultiArray",
-    "belief": "std_msgs/msg/Float64MultiArray",
-    "kalman_estimate": "geometry_msgs/msg/PoseWithCovariance",
-    "kalman_estimate_stamped": "geometry_msgs/msg/PoseWithCovarianceStamped",
-}
 METADATA_NAME = "estimation_nodes"
 _SEPARATOR = "=" * 80
 _PRIMITIVES = {
@@ -42,18 +31,12 @@ class RecordingError(Exception):
     """A recording that cannot be written or read; the message says why in one line."""
 
 
-def _share_dirs() -> list[Path]:
-    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-    prefixes.append(sys.prefix)
-    return [Path(p) / "share" for p in prefixes if (Path(p) / "share").is_dir()]
-
-
 def _msg_text(package: str, name: str) -> str:
-    for share in _share_dirs():
+    for share in share_dirs():
         path = share / package / "msg" / f"{name}.msg"
         if path.is_file():
             return path.read_text(encoding="utf-8")
-    raise RecordingError(f"no definition of {package}/msg/{name} under {_share_dirs()}")
+    raise RecordingError(f"no definition of {package}/msg/{name} under {share_dirs()}")
 
 
 def _field_types(text: str, package: str) -> list[tuple[str, str]]:
@@ -142,14 +125,14 @@ def _base(topic: str) -> str:
 
 def _add_decoded(record: RunRecord, topic: str, msg: object) -> None:
     base = _base(topic)
-    if base in ("motion_cmd", "tile_observation", "position_measurement"):
+    if base in topics.INPUTS:
         record.add_event(base, msg.data)
-    elif base == "true_position":
+    elif base == topics.TRUE_POSITION:
         record.truth.append(msg.data)
-    elif base in ("belief_predicted", "belief"):
+    elif base in (topics.BELIEF_PREDICTED, topics.BELIEF):
         values = np.asarray(msg.data, dtype=np.float64)
-        (record.predicted if base == "belief_predicted" else record.corrected).append(values)
-    elif base == "kalman_estimate":
+        (record.predicted if base == topics.BELIEF_PREDICTED else record.corrected).append(values)
+    elif base == topics.KALMAN_ESTIMATE:
         record.kalman.append((msg.pose.position.x, msg.covariance[0]))
 
 

@@ -12,16 +12,18 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import signal
 import subprocess
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from estimation_nodes.params_files import check_params_file
-from estimation_nodes.recording import RecordingError
-from estimation_nodes.run_record import RunRecord, summarize
+from estimation_nodes.params import topics
+from estimation_nodes.params.files import check_params_file
+from estimation_nodes.tools.graph_runtime import spin_until, stop_process
+from estimation_nodes.tools.installed import share_dirs
+from estimation_nodes.tools.recording import RecordingError
+from estimation_nodes.tools.run_record import RunRecord, summarize
 
 NODE_MODULES = {
     "estimator": "estimation_nodes.nodes.estimator",
@@ -40,10 +42,8 @@ class DemoError(Exception):
 
 def scenario_dirs() -> list[Path]:
     """Where installed and source-tree scenario files live, most specific first."""
-    prefixes = [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
-    prefixes.append(sys.prefix)
-    dirs = [Path(p) / "share" / "estimation_nodes" / "msgs_config" for p in prefixes]
-    dirs.append(Path(__file__).resolve().parent.parent / "msgs_config")
+    dirs = [share / "estimation_nodes" / "msgs_config" for share in share_dirs()]
+    dirs.append(Path(__file__).resolve().parents[2] / "msgs_config")
     return [d for d in dirs if d.is_dir()]
 
 
@@ -133,7 +133,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     if args.record:
         print(f"estimation_demo: recorded to {args.record}")
     if args.plot:
-        from estimation_nodes.plot import render
+        from estimation_nodes.tools.plot import render
 
         print(f"estimation_demo: plot written to {render(record, args.plot)}")
     sys.exit(code)
@@ -141,15 +141,15 @@ def main(argv: Sequence[str] | None = None) -> None:
 
 def make_monitor(params: Path, args: argparse.Namespace):
     """The monitor node, writing an MCAP file when --record asks for one."""
-    from estimation_nodes.monitor import RunMonitor
-    from estimation_nodes.recording import TOPIC_TYPES, McapRunWriter
+    from estimation_nodes.tools.monitor import RunMonitor
+    from estimation_nodes.tools.recording import McapRunWriter
 
     writer = None
     if args.record:
         metadata = {"parameters_yaml": params.read_text(encoding="utf-8"),
                     "parameters_file": str(params)}
         # Topics as the nodes resolve them: this script runs them in the root namespace.
-        writer = McapRunWriter(args.record, {f"/{t}": n for t, n in TOPIC_TYPES.items()},
+        writer = McapRunWriter(args.record, {f"/{t}": n for t, n in topics.TOPIC_TYPES.items()},
                                metadata)
     return RunMonitor(quiet=args.quiet, writer=writer), writer
 
@@ -157,32 +157,11 @@ def make_monitor(params: Path, args: argparse.Namespace):
 # --- running the graph -----------------------------------------------------------------------
 
 
-def spin_until(executor, done, deadline: float) -> bool:
-    """Spin until ``done()`` or the deadline; True when done."""
-    while time.monotonic() < deadline:
-        if done():
-            return True
-        executor.spin_once(timeout_sec=0.05)
-    return done()
-
-
-def stop_process(process: subprocess.Popen, grace: float = 5.0) -> int:
-    """End one child by its pid: SIGINT (a clean rclpy shutdown), then SIGKILL."""
-    if process.poll() is None:
-        process.send_signal(signal.SIGINT)
-        try:
-            process.wait(timeout=grace)
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-    return process.returncode
-
-
 def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecord]:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from estimation_nodes.nodes.ros_common import PARENT_PID_ENV
+    from estimation_nodes.nodes.process import PARENT_PID_ENV
 
     processes: dict[str, subprocess.Popen] = {}
     rclpy.init()
@@ -196,18 +175,19 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
         for name in START_ORDER:
             if name == "motion_commander":
                 # The monitor must hear the sensor's and the estimator's first messages.
-                spin_until(executor, lambda: monitor.publishers_matched(("motion_cmd",)),
-                           deadline)
+                spin_until(executor, lambda: monitor.publishers_matched((topics.MOTION_CMD,)),
+                           deadline - time.monotonic())
             command = [sys.executable, "-m", NODE_MODULES[name],
                        "--ros-args", "--params-file", str(params)]
             if name == "motion_commander":
                 command += commander_overrides(args.settle, exit_when_done=True)
-            # The children end with the demo even if it is killed (ros_common.end_with_parent).
+            # The children end with the demo even if it is killed (nodes/process.end_with_parent).
             processes[name] = subprocess.Popen(
                 command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())})
         commander = processes["motion_commander"]
         finished = spin_until(executor, lambda: any(p.poll() is not None
-                                                    for p in processes.values()), deadline)
+                                                    for p in processes.values()),
+                              deadline - time.monotonic())
         failed = {n: p.returncode for n, p in processes.items()
                   if p.poll() is not None and p.returncode != 0}
         if not finished:
@@ -217,7 +197,7 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
             print(f"estimation_demo: stopped early: exit codes {failed}", file=sys.stderr)
             code = 1
         else:
-            spin_until(executor, lambda: False, time.monotonic() + args.linger)
+            spin_until(executor, lambda: False, args.linger)
     except KeyboardInterrupt:
         print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
         code = 130
@@ -241,7 +221,7 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     from estimation_nodes.nodes.estimator import Estimator
     from estimation_nodes.nodes.motion_commander import MotionCommander
     from estimation_nodes.nodes.tile_sensor import TileSensor
-    from estimation_nodes.nodes.ros_common import ConfigurationError
+    from estimation_nodes.nodes.parameters import ConfigurationError
 
     ros_args = ["--ros-args", "--params-file", str(params),
                 *commander_overrides(args.settle, exit_when_done=False)]
@@ -260,11 +240,11 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
         commander = nodes[-1]
         limit = commander.command_limit
         done = spin_until(executor, lambda: limit is not None and commander.sent >= limit,
-                          time.monotonic() + args.timeout)
+                          args.timeout)
         if not done:
             print("estimation_demo: stopped early: timeout", file=sys.stderr)
             code = 1
-        spin_until(executor, lambda: False, time.monotonic() + args.linger)
+        spin_until(executor, lambda: False, args.linger)
     except ConfigurationError as error:
         print(f"estimation_demo: invalid parameter {error}", file=sys.stderr)
         code = 2

@@ -1,0 +1,85 @@
+"""A node's process: main(), exit codes, ending with the parent that started it."""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import signal
+import sys
+from collections.abc import Callable, Sequence
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+from estimation_nodes.nodes.parameters import ConfigurationError
+from estimation_nodes.nodes.rclpy_internals import RCLError
+from estimation_nodes.params.files import check_params_file, params_files_in
+
+
+def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> int:
+    """Run one node until Ctrl-C or shutdown, the way the Jazzy demos do.
+
+    Returns the process exit code: 0 on a normal end, 2 when a parameter is
+    invalid (one log line names it), 1 on an unexpected error.
+    """
+    name = getattr(node_class, "node_name", node_class.__name__)
+    argv = list(sys.argv if args is None else args)
+    if not end_with_parent():
+        return 0
+    try:
+        for path in params_files_in(argv):
+            check_params_file(path)
+        rclpy.init(args=argv)
+    except (ValueError, RCLError) as error:
+        print(f"[FATAL] [{name}]: cannot start: {str(error).split(', at ')[0]}",
+              file=sys.stderr)
+        return 2
+    node = None
+    code = 0
+    try:
+        node = node_class()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except ConfigurationError as error:
+        rclpy.logging.get_logger(name).fatal(f"invalid parameter {error}")
+        code = 2
+    except SystemExit as done:
+        code = int(done.code or 0)
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return code
+
+
+#: Set by a parent (estimation_demo) to its pid: the node then ends when that
+#: parent dies, even by SIGKILL, instead of running on as an orphan.
+PARENT_PID_ENV = "ESTIMATION_NODES_PARENT_PID"
+_PR_SET_PDEATHSIG = 1
+
+
+def end_with_parent() -> bool:
+    """Ask Linux for a SIGINT (a clean shutdown) when the parent named in the
+    environment dies. False when that parent is already gone: nothing to run for.
+    Does nothing when run by hand, or off Linux."""
+    expected = os.environ.get(PARENT_PID_ENV)
+    if not expected or not sys.platform.startswith("linux"):
+        return True
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGINT, 0, 0, 0)
+    except (OSError, AttributeError):
+        return True
+    # Checked after prctl: a parent that died before it took effect sends nothing.
+    return str(os.getppid()) == expected
+
+
+def main_for(node_class: Callable[..., Node]) -> Callable[[], None]:
+    """A console-script entry point for ``node_class``."""
+
+    def main(args: Sequence[str] | None = None) -> None:
+        sys.exit(run(node_class, args))
+
+    return main

@@ -1,0 +1,140 @@
+"""Every node's parameters in one table: name, default, description, bounds.
+
+No rclpy here: the nodes declare these specs (nodes/parameters.py), the
+builders turn their values into core models (params/builders.py), and the
+offline tools read parameter files against the same defaults.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from estimation_nodes.core.models import (
+    BOOK_CLASSES,
+    BOOK_KERNEL,
+    BOOK_SENSOR_MODEL,
+    BOOK_WORLD,
+)
+
+#: Marks a parameter with no default: declared by type, unset means "not given".
+UNSET = None
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter: name, default (or the type name when it has none), description."""
+
+    name: str
+    default: Any
+    description: str
+    read_only: bool = False
+    #: For parameters without a default: one of "string_array", "double_array".
+    type_name: str = ""
+    #: Inclusive bounds shown by `ros2 param describe` (numbers only).
+    min_value: float | None = None
+    max_value: float | None = None
+
+
+WORLD_SPECS = (
+    ParamSpec("world", list(BOOK_WORLD),
+              "Class name of each cell of the cyclic world, in order (index 0 first)."),
+    ParamSpec("world_file", "",
+              "Path of a UTF-8 text file with the class name of each cell, separated by white "
+              "space; when set it replaces 'world' (for large worlds).", read_only=True),
+    ParamSpec("classes", list(BOOK_CLASSES), "Names of the tile classes the sensor reports."),
+    ParamSpec("sensor_model", [p for row in BOOK_SENSOR_MODEL for p in row],
+              "p(observed class | true class), row-major: one row per true class in the "
+              "order of 'classes', one column per observed class; rows sum to 1."),
+    ParamSpec("motion_kernel", list(BOOK_KERNEL),
+              "Probabilities of landing at offsets -k..k around the commanded target "
+              "(odd length, centred, sums to 1)."),
+)
+
+ESTIMATOR_SPECS = WORLD_SPECS + (
+    ParamSpec("initial_belief", UNSET,
+              "Prior over the cells (normalized); leave unset for a uniform prior.",
+              type_name="double_array"),
+    ParamSpec("kalman.mode", "scalar",
+              "'scalar': the book's Algorithm 4 with kalman.x0/P0/var_u/var_z; 'matrix': "
+              "the matrix filter with kalman.matrix.*.", read_only=True),
+    ParamSpec("kalman.x0", 0.0, "Initial position estimate (cells) of the scalar filter."),
+    ParamSpec("kalman.P0", 100.0, "Initial variance of the scalar filter (> 0).",),
+    ParamSpec("kalman.var_u", 2.0, "Variance of an executed move (> 0)."),
+    ParamSpec("kalman.var_z", 4.0, "Variance of a position measurement (> 0)."),
+    ParamSpec("kalman.matrix.x0", [0.0], "Matrix mode: initial state; its length n sets the "
+              "state size. Component 0 is published as the position."),
+    ParamSpec("kalman.matrix.P0", [100.0], "Matrix mode: initial covariance, n x n row-major."),
+    ParamSpec("kalman.matrix.A", [1.0], "Matrix mode: transition matrix A, n x n row-major."),
+    ParamSpec("kalman.matrix.B", [1.0], "Matrix mode: input matrix B, n x 1 (u is the "
+              "motion command)."),
+    ParamSpec("kalman.matrix.C", [1.0], "Matrix mode: measurement matrix C, 1 x n."),
+    ParamSpec("kalman.matrix.F", [1.0], "Matrix mode: noise-input matrix F, n x q row-major."),
+    ParamSpec("kalman.matrix.Q", [2.0], "Matrix mode: process noise covariance, q x q."),
+    ParamSpec("kalman.matrix.R", [4.0], "Matrix mode: measurement noise variance, 1 x 1."),
+    ParamSpec("frame_id", "map", "frame_id of kalman_estimate_stamped."),
+    ParamSpec("history_depth", 100,
+              "How many past estimates each output topic keeps for late subscribers "
+              "(transient_local). Lower it for very large worlds.", read_only=True,
+              min_value=1, max_value=100000),
+    ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics messages.",
+              read_only=True, min_value=0.01, max_value=3600.0),
+    ParamSpec("compiled_kernels", False,
+              "Worlds of 65,536 cells or more: run the histogram steps as numba-compiled "
+              "kernels (a 1e6-cell step in about half the CPU time) at the price of 100 to "
+              "150 MB of resident memory for numba and LLVM and 0.5 s more start-up. Off by "
+              "default: a step through DDS at 1e6 cells is dominated by moving the two "
+              "belief messages, so the node's end-to-end rate does not change measurably.",
+              read_only=True),
+)
+
+
+def spec_defaults(specs: tuple[ParamSpec, ...]) -> dict[str, Any]:
+    """Every parameter's default, by name (UNSET for those without one)."""
+    return {spec.name: spec.default for spec in specs}
+
+
+SENSOR_SPECS = WORLD_SPECS + (
+    ParamSpec("initial_cell", 0, "True starting cell of the robot (index, 0-based).",
+              read_only=True),
+    ParamSpec("seed", -1, "Seed of the random motion and sensor noise; -1 draws one from the "
+              "operating system.", read_only=True),
+    ParamSpec("measurement_variance", 4.0,
+              "Variance of the Gaussian noise on position_measurement (cells^2, > 0).",
+              read_only=True),
+    ParamSpec("scripted_observations", UNSET,
+              "Scripted mode: tile classes to publish, one per command, instead of sampling.",
+              read_only=True, type_name="string_array"),
+    ParamSpec("scripted_measurements", UNSET,
+              "Scripted mode: position measurements to publish, one per command.",
+              read_only=True, type_name="double_array"),
+    ParamSpec("hold_until_matched", True,
+              "Keep readings (up to 1000 per topic) while no subscriber is matched on their "
+              "topic and send them, in order, once one is: a sensor (re)started before the "
+              "estimator has discovered it loses nothing.", read_only=True),
+)
+
+COMMANDER_SPECS = (
+    ParamSpec("commands", [1], "Motion commands to publish, in cells (positive: index + u).",
+              read_only=True),
+    ParamSpec("rate_hz", 2.0, "Commands per second.", read_only=True,
+              min_value=0.001, max_value=100000.0),
+    ParamSpec("repeat", False, "Start the sequence again after its last command.",
+              read_only=True),
+    ParamSpec("max_commands", 0, "Stop after this many commands in all (0: no limit).",
+              read_only=True, min_value=0, max_value=2**31 - 1),
+    ParamSpec("required_subscribers", 2, "Matched subscriptions on motion_cmd to wait for "
+              "before the first command.", read_only=True, min_value=0, max_value=1000),
+    ParamSpec("start_delay", 1.0, "Seconds to wait after the subscribers are there, so the "
+              "rest of the graph can discover itself.", read_only=True,
+              min_value=0.0, max_value=3600.0),
+    ParamSpec("exit_when_done", False, "End the process after the last command instead of "
+              "staying up.", read_only=True),
+)
+
+#: Each node's parameters, by node name.
+NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
+    "estimator": ESTIMATOR_SPECS,
+    "tile_sensor": SENSOR_SPECS,
+    "motion_commander": COMMANDER_SPECS,
+}

@@ -1,0 +1,31 @@
+"""The graph's topics: names (relative, so namespaces and remaps apply) and ROS types.
+
+The nodes publish and subscribe these; the demo's monitor, the recorder and
+the replay read them by the same names.
+"""
+
+from __future__ import annotations
+
+MOTION_CMD = "motion_cmd"
+TILE_OBSERVATION = "tile_observation"
+POSITION_MEASUREMENT = "position_measurement"
+TRUE_POSITION = "true_position"
+BELIEF_PREDICTED = "belief_predicted"
+BELIEF = "belief"
+KALMAN_ESTIMATE = "kalman_estimate"
+KALMAN_ESTIMATE_STAMPED = "kalman_estimate_stamped"
+
+#: What drives the estimator, in the order it subscribes (commands first).
+INPUTS = (MOTION_CMD, TILE_OBSERVATION, POSITION_MEASUREMENT)
+
+#: Every topic of a run: relative name -> ROS type.
+TOPIC_TYPES = {
+    MOTION_CMD: "std_msgs/msg/Int32",
+    TILE_OBSERVATION: "std_msgs/msg/String",
+    POSITION_MEASUREMENT: "std_msgs/msg/Float64",
+    TRUE_POSITION: "std_msgs/msg/Int64",
+    BELIEF_PREDICTED: "std_msgs/msg/Float64MultiArray",
+    BELIEF: "std_msgs/msg/Float64MultiArray",
+    KALMAN_ESTIMATE: "geometry_msgs/msg/PoseWithCovariance",
+    KALMAN_ESTIMATE_STAMPED: "geometry_msgs/msg/PoseWithCovarianceStamped",
+}

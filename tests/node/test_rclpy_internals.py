@@ -1,0 +1,57 @@
+"""The private rclpy API that nodes/rclpy_internals.py relies on is still there.
+
+If one of these fails after an rclpy upgrade, the message names what changed:
+replace that piece (or drop the one-waitable optimization for rclpy's public
+SubscriptionEventCallbacks) before anything else.
+"""
+
+import importlib
+
+import pytest
+from rclpy.node import Node
+from std_msgs.msg import String
+
+from estimation_nodes.nodes.qos import INPUT_QOS
+
+
+@pytest.mark.parametrize("module, name", [
+    ("rclpy._rclpy_pybind11", "RCLError"),
+    ("rclpy.impl.implementation_singleton", "rclpy_implementation"),
+    ("rclpy.executors", "await_or_execute"),
+])
+def test_private_names_still_exist(module, name):
+    assert hasattr(importlib.import_module(module), name), (
+        f"rclpy changed: {module}.{name} is gone; nodes/rclpy_internals.py uses it")
+
+
+def test_an_event_handle_can_be_made_waited_on_and_taken(context):
+    from rclpy.event_handler import SubscriptionEventCallbacks
+    from rclpy.executors import SingleThreadedExecutor
+
+    from estimation_nodes.nodes.rclpy_internals import MESSAGE_LOST, SubscriptionEvents
+
+    node = Node("internals_probe", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        subscription = node.create_subscription(
+            String, "probe", lambda msg: None, INPUT_QOS,
+            event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
+        events = SubscriptionEvents(node.default_callback_group)
+        try:
+            events.watch(subscription, MESSAGE_LOST, lambda info: None)
+        except (AttributeError, TypeError) as error:
+            pytest.fail(f"rclpy changed: EventHandle(subscription handle, event type) "
+                        f"failed: {error}")
+        node.add_waitable(events)
+        executor.add_node(node)
+        try:
+            # One pass through the executor: add_to_wait_set, is_ready, (take_data).
+            executor.spin_once(timeout_sec=0.05)
+        except (AttributeError, TypeError) as error:
+            pytest.fail(f"rclpy changed: the wait set's event API (add_event, "
+                        f"is_ready('event', i)) failed: {error}")
+        node.remove_waitable(events)
+        events.destroy()
+    finally:
+        executor.shutdown()
+        node.destroy_node()
