@@ -8,6 +8,7 @@ the same numbers from the same inputs.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
@@ -72,6 +73,15 @@ class HistogramFilter:
         return self.belief
 
 
+def _overflow_checked_by_commit() -> np.errstate:
+    """numpy's overflow warnings are noise here: ``_commit`` refuses any non-finite result."""
+    return np.errstate(over="ignore", invalid="ignore")
+
+
+class NonFiniteResultError(ValueError):
+    """A step whose result would not be finite (an extreme input): nothing was changed."""
+
+
 class PositionEstimate(NamedTuple):
     """What the estimator publishes of the Kalman filter: position and its variance."""
 
@@ -106,24 +116,40 @@ class KalmanFilter:
         return PositionEstimate(float(self.x[0]), float(self.P[0, 0]))
 
     def predict(self, u: float) -> PositionEstimate:
+        """Predict with a move ``u``; raises ValueError (non-finite u, or a result that would
+        not be finite) and then changes nothing."""
         model = self._model
         if isinstance(model, ScalarKalmanModel):
-            x, var = kalman.predict_scalar(self.x[0], self.P[0, 0], u, model.var_u)
-            self.x, self.P = np.array([x]), np.array([[var]])
+            x, var = kalman.predict_scalar(float(self.x[0]), float(self.P[0, 0]), u, model.var_u)
+            self._commit(np.array([x]), np.array([[var]]))
         else:
-            self.x, self.P = kalman.predict(self.x, self.P, [u], model)
+            with _overflow_checked_by_commit():
+                self._commit(*kalman.predict(self.x, self.P, [u], model))
         return self.estimate
 
     def correct(self, z: float) -> PositionEstimate:
-        """Correct with a position measurement; raises ValueError for a non-finite z."""
+        """Correct with a position measurement; raises ValueError (non-finite z, or a result
+        that would not be finite) and then changes nothing."""
         model = self._model
         if isinstance(model, ScalarKalmanModel):
-            x, var = self.x[0], self.P[0, 0]
+            x, var = float(self.x[0]), float(self.P[0, 0])
             x_corrected, var_corrected, _ = kalman.correct_scalar(x, var, z, model.var_z)
-            self.last_nis = kalman.normalized_innovation_squared_scalar(x, var, z, model.var_z)
-            self.x, self.P = np.array([x_corrected]), np.array([[var_corrected]])
+            nis = kalman.normalized_innovation_squared_scalar(x, var, z, model.var_z)
+            self._commit(np.array([x_corrected]), np.array([[var_corrected]]), nis)
         else:
-            nis = kalman.normalized_innovation_squared(self.x, self.P, [z], model)
-            self.x, self.P, _ = kalman.correct(self.x, self.P, [z], model)
-            self.last_nis = nis
+            with _overflow_checked_by_commit():
+                nis = kalman.normalized_innovation_squared(self.x, self.P, [z], model)
+                x_new, P_new, _ = kalman.correct(self.x, self.P, [z], model)
+                self._commit(x_new, P_new, nis)
         return self.estimate
+
+    def _commit(self, x: FloatArray, P: FloatArray, nis: float | None = None) -> None:
+        """Take a step's result only if every number of it is finite."""
+        if not (np.isfinite(x).all() and np.isfinite(P).all()
+                and (nis is None or math.isfinite(nis))):
+            raise NonFiniteResultError(
+                "the result would not be finite (the input is too extreme for the current "
+                "estimate); estimate kept")
+        self.x, self.P = x, P
+        if nis is not None:
+            self.last_nis = nis

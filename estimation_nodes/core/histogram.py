@@ -155,15 +155,22 @@ def correct(
         raise ZeroEvidenceError(
             f"observation has evidence {evidence!r}: every cell of the belief rules it out"
         )
+    scale = 1.0 / evidence
+    if not math.isfinite(scale):
+        # A subnormal evidence: its reciprocal overflows, but each term is at most
+        # the evidence, so dividing by it stays finite.
+        posterior = np.multiply(belief, likelihood, out=out)
+        np.divide(posterior, evidence, out=posterior)
+        return posterior, evidence
     kernels = compiled_kernels(belief.size, compiled)
     if kernels is not None:   # product and scaling fused: the same operations, one pass
         posterior = np.empty(belief.size) if out is None else out
         kernels.scaled_product_into(
             np.ascontiguousarray(belief, dtype=np.float64),
-            np.ascontiguousarray(likelihood, dtype=np.float64), 1.0 / evidence, posterior)
+            np.ascontiguousarray(likelihood, dtype=np.float64), scale, posterior)
         return posterior, evidence
     posterior = np.multiply(belief, likelihood, out=out)
-    np.multiply(posterior, 1.0 / evidence, out=posterior)
+    np.multiply(posterior, scale, out=posterior)
     return posterior, evidence
 
 
@@ -175,4 +182,5 @@ def most_likely_cell(belief: FloatArray) -> int:
 def entropy(belief: FloatArray) -> float:
     """Shannon entropy of the belief in bits (0: certain; log2 N: uniform)."""
     positive = belief[belief > 0.0]
-    return float(-(positive * np.log2(positive)).sum())
+    # abs: a certain belief sums to -0.0, which would print as "-0".
+    return abs(float((positive * np.log2(positive)).sum()))

@@ -157,8 +157,12 @@ def correct(
 
 
 def normalized_innovation_squared_scalar(x: float, var: float, z: float, var_z: float) -> float:
-    """NIS of a scalar measurement: (z - x)^2 / (var + var_z), chi-square with 1 dof."""
-    return (z - x) ** 2 / (var + var_z)
+    """NIS of a scalar measurement: (z - x)^2 / (var + var_z), chi-square with 1 dof.
+
+    inf (not OverflowError, as ``**`` would raise) when the square overflows.
+    """
+    innovation = z - x
+    return innovation * innovation / (var + var_z)
 
 
 def normalized_innovation_squared(

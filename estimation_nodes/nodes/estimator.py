@@ -2,8 +2,15 @@
 
 Events are handled one at a time in arrival order: ``motion_cmd`` predicts
 both filters, ``tile_observation`` corrects the histogram, and
-``position_measurement`` corrects the Kalman filter. A bad message is dropped
-with a throttled warning and counted; the filters are left untouched.
+``position_measurement`` corrects the Kalman filter. A bad message, or one
+whose result would not be finite, is dropped with a throttled warning and
+counted; the filters are left untouched.
+
+A parameter change that is right on its own but does not fit the others yet
+(three classes with a 2 x 2 sensor model, a 20-cell world with a 5-cell prior)
+is accepted and held: the filters keep the last consistent configuration until
+the parameters agree again, so changes that need several parameters work with
+``ros2 param set`` one at a time and with ``ros2 param load``.
 """
 
 from __future__ import annotations
@@ -29,7 +36,12 @@ from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
 
 from estimation_nodes.core import histogram
-from estimation_nodes.core.filter_state import HistogramFilter, KalmanFilter
+from estimation_nodes.core.filter_state import (
+    HistogramFilter,
+    KalmanFilter,
+    NonFiniteResultError,
+    PositionEstimate,
+)
 from estimation_nodes.nodes.messages import to_multiarray, to_pose_with_covariance
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
@@ -45,7 +57,12 @@ from estimation_nodes.nodes.rclpy_internals import (
     SubscriptionEvents,
 )
 from estimation_nodes.params import topics
-from estimation_nodes.params.builders import EstimatorSettings, build_estimator_settings
+from estimation_nodes.params.builders import (
+    EstimatorSettings,
+    build_estimator_settings,
+    check_estimator_value,
+)
+from estimation_nodes.params.wording import plural
 from estimation_nodes.params.specs import ESTIMATOR_SPECS
 
 #: Seconds between two warnings about the same kind of rejected message.
@@ -60,14 +77,18 @@ class Estimator(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.node_name, **kwargs)
         self._values, settings = declare_and_build(self, ESTIMATOR_SPECS, build_estimator_settings)
+        # The settings in force and the values they were built from; self._values may
+        # run ahead of them while a change is held (see the module docstring).
         self._settings = settings
+        self._consistent_values = self._values
+        self.held_reason: str | None = None
         self._histogram = HistogramFilter(
             settings.histogram, settings.initial_belief, self._values["compiled_kernels"])
         self._kalman = KalmanFilter(settings.kalman.initial, settings.kalman.model)
         self.handled: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self._last_warning: dict[str, float] = {}
-        self._proposed: tuple[dict[str, Any], EstimatorSettings] | None = None
+        self._proposed: tuple[dict[str, Any], EstimatorSettings | None, str | None] | None = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._on_parameters_set)
 
@@ -75,9 +96,10 @@ class Estimator(Node):
         self._belief_predicted_pub = self._output(
             Float64MultiArray, topics.BELIEF_PREDICTED, latched)
         self._belief_pub = self._output(Float64MultiArray, topics.BELIEF, latched)
-        self._kalman_pub = self._output(PoseWithCovariance, topics.KALMAN_ESTIMATE, latched)
-        self._kalman_stamped_pub = self._output(
-            PoseWithCovarianceStamped, topics.KALMAN_ESTIMATE_STAMPED, latched)
+        self._kalman_pubs = self._pose_outputs(
+            topics.KALMAN_ESTIMATE, topics.KALMAN_ESTIMATE_STAMPED, latched)
+        self._kalman_predicted_pubs = self._pose_outputs(
+            topics.KALMAN_ESTIMATE_PREDICTED, topics.KALMAN_ESTIMATE_PREDICTED_STAMPED, latched)
         self._diagnostics_pub = self._output(DiagnosticArray, "/diagnostics", 10)
         # motion_cmd first: when a command and the reading it caused are ready
         # together, the executor takes them in subscription order.
@@ -103,13 +125,22 @@ class Estimator(Node):
     # --- parameters -------------------------------------------------------------------------
 
     def _on_set_parameters(self, changes: list[Parameter]) -> SetParametersResult:
-        """Validate the whole proposed configuration; rclpy then sets it or refuses it."""
-        proposed = overlay(self._values, changes)
+        """Refuse a value that is wrong on its own; accept the rest, applied or held."""
         try:
-            settings = build_estimator_settings(proposed, previous=(self._values, self._settings))
+            for change in changes:
+                check_estimator_value(change.name, change.value)
         except ValueError as error:
             return rejection(str(error))
-        self._proposed = (proposed, settings)
+        proposed = overlay(self._values, changes)
+        try:
+            settings = build_estimator_settings(
+                proposed, previous=(self._consistent_values, self._settings))
+        except ValueError as error:
+            held = (f"held, not applied yet: {error}; the filters keep the last consistent "
+                    f"parameters until the others agree")
+            self._proposed = (proposed, None, held)
+            return SetParametersResult(successful=True)
+        self._proposed = (proposed, settings, None)
         return SetParametersResult(successful=True)
 
     def _on_parameters_set(self, _changes: list[Parameter]) -> None:
@@ -120,19 +151,32 @@ class Estimator(Node):
         """
         if self._proposed is None:
             return
-        (self._values, settings), self._proposed = self._proposed, None
-        self._settings = settings
+        was_held = self.held_reason is not None
+        (self._values, settings, self.held_reason), self._proposed = self._proposed, None
+        if settings is None:
+            self.get_logger().warning(f"parameters {self.held_reason}")
+            return
+        if was_held:
+            self.get_logger().info("parameters agree again: the held change is applied")
+        self._settings, self._consistent_values = settings, self._values
         if self._histogram.reconfigure(settings.histogram, settings.initial_belief):
             self.get_logger().info("new world size or prior: histogram belief reset")
+            self._belief_pub.publish(to_multiarray(self._histogram.belief, "cells"))
         self._kalman.reconfigure(settings.kalman.initial, settings.kalman.model)
 
     # --- events -----------------------------------------------------------------------------
 
     def _on_motion_cmd(self, msg: Int32) -> None:
         self._histogram.predict(msg.data)
-        self._kalman.predict(float(msg.data))
         self.handled["motion_cmd"] += 1
         self._belief_predicted_pub.publish(to_multiarray(self._histogram.belief, "cells"))
+        try:
+            estimate = self._kalman.predict(float(msg.data))
+        except NonFiniteResultError as error:
+            self._reject("numerical_overflow", f"Kalman prediction of motion_cmd {msg.data} "
+                         f"dropped: {error}")
+            return
+        self._publish_pose(self._kalman_predicted_pubs, estimate)
 
     def _on_tile_observation(self, msg: String) -> None:
         try:
@@ -149,26 +193,42 @@ class Estimator(Node):
     def _on_position_measurement(self, msg: Float64) -> None:
         try:
             estimate = self._kalman.correct(msg.data)
+        except NonFiniteResultError as error:
+            self._reject("numerical_overflow", f"position_measurement {msg.data!r} dropped: "
+                         f"{error}")
+            return
         except ValueError as error:
             self._reject("non_finite_measurement", f"position_measurement dropped: {error}")
             return
         self.handled["position_measurement"] += 1
-        pose = to_pose_with_covariance(estimate.x, estimate.var)
-        self._kalman_pub.publish(pose)
-        stamped = PoseWithCovarianceStamped()
-        stamped.header.stamp = self.get_clock().now().to_msg()
-        stamped.header.frame_id = self._values["frame_id"]
-        stamped.pose = pose
-        self._kalman_stamped_pub.publish(stamped)
+        self._publish_pose(self._kalman_pubs, estimate)
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        """Back to the initial state, published on every output so that a late subscriber
+        gets the state after the reset, not an estimate from before it."""
         self._histogram.reset()
         self._kalman.reset()
         self.handled["reset"] += 1
+        belief = to_multiarray(self._histogram.belief, "cells")
+        self._belief_predicted_pub.publish(belief)
+        self._belief_pub.publish(belief)
+        for publishers in (self._kalman_predicted_pubs, self._kalman_pubs):
+            self._publish_pose(publishers, self._kalman.estimate)
         response.success = True
         response.message = "histogram belief and Kalman estimate back to their initial state"
         self.get_logger().info(response.message)
         return response
+
+    def _publish_pose(self, publishers: tuple[Any, Any], estimate: PositionEstimate) -> None:
+        """The Kalman estimate as a PoseWithCovariance and its stamped twin."""
+        plain, stamped_pub = publishers
+        pose = to_pose_with_covariance(estimate.x, estimate.var)
+        plain.publish(pose)
+        stamped = PoseWithCovarianceStamped()
+        stamped.header.stamp = self.get_clock().now().to_msg()
+        stamped.header.frame_id = self._values["frame_id"]
+        stamped.pose = pose
+        stamped_pub.publish(stamped)
 
     # Every QoS event handler is a Python waitable that rclpy's executor visits on
     # each iteration, whether or not it fires: rclpy gives each publisher and
@@ -188,11 +248,16 @@ class Estimator(Node):
             msg_type, topic, qos,
             event_callbacks=PublisherEventCallbacks(use_default_callbacks=False))
 
+    def _pose_outputs(self, topic: str, stamped_topic: str, qos: Any) -> tuple[Any, Any]:
+        return (self._output(PoseWithCovariance, topic, qos),
+                self._output(PoseWithCovarianceStamped, stamped_topic, qos))
+
     def _watch_input_events(self, subscription: Any, topic: str) -> None:
         """Count messages DDS reports lost, and warn of publishers we cannot hear."""
 
         def on_lost(info: QoSMessageLostInfo) -> None:
-            self._reject(f"lost.{topic}", f"{info.total_count_change} {topic} messages lost",
+            self._reject(f"lost.{topic}", f"{plural(info.total_count_change, topic + ' message')} "
+                         "lost",
                          count=info.total_count_change)
 
         def on_incompatible_qos(info: QoSRequestedIncompatibleQoSInfo) -> None:
@@ -222,23 +287,32 @@ class Estimator(Node):
 
     def _publish_diagnostics(self) -> None:
         belief = self._histogram.belief
-        values = {
+        values: dict[str, Any] = {
             "cells": belief.size,
             "most_likely_cell": histogram.most_likely_cell(belief),
             "belief_entropy_bits": f"{histogram.entropy(belief):.6g}",
-            "last_evidence": f"{self._histogram.last_evidence:.6g}",
             "kalman_x": f"{self._kalman.estimate.x:.9g}",
             "kalman_var": f"{self._kalman.estimate.var:.9g}",
-            "kalman_nis": f"{self._kalman.last_nis:.6g}",
         }
+        # Only once there is one: "nan" before the first correction reads as a fault.
+        if math.isfinite(self._histogram.last_evidence):
+            values["last_evidence"] = f"{self._histogram.last_evidence:.6g}"
+        if math.isfinite(self._kalman.last_nis):
+            values["kalman_nis"] = f"{self._kalman.last_nis:.6g}"
         values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
         values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
         values.update({f"incompatible_publishers.{k}": v
                        for k, v in sorted(self.qos_incompatible.items())})
+        problems = []
+        if self.rejected:
+            problems.append(f"{plural(sum(self.rejected.values()), 'message')} rejected")
+        if self.held_reason is not None:
+            values["parameters_held"] = self.held_reason
+            problems.append("parameter change held")
         status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if self.rejected else DiagnosticStatus.OK,
+            level=DiagnosticStatus.WARN if problems else DiagnosticStatus.OK,
             name=f"{self.get_name()}: filters",
-            message=f"{sum(self.rejected.values())} messages rejected" if self.rejected else "ok",
+            message="; ".join(problems) or "ok",
             hardware_id=self.get_fully_qualified_name(),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
         )

@@ -26,6 +26,7 @@ from estimation_nodes.nodes.qos import INPUT_QOS
 from estimation_nodes.params import topics
 from estimation_nodes.params.builders import build_commander_settings
 from estimation_nodes.params.specs import COMMANDER_SPECS
+from estimation_nodes.params.wording import plural
 
 #: How often the commander checks for subscribers while it waits.
 POLL_PERIOD_S = 0.05
@@ -46,9 +47,11 @@ class MotionCommander(Node):
         self._ready_since: float | None = None
         self._publisher = self.create_publisher(Int32, topics.MOTION_CMD, INPUT_QOS)
         self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
+        required = values["required_subscribers"]
         self.get_logger().info(
-            f"waiting for {values['required_subscribers']} subscribers on "
-            f"{self._publisher.topic_name}")
+            f"waiting for {plural(required, 'subscriber')} on {self._publisher.topic_name}"
+            if required else f"sending on {self._publisher.topic_name} without waiting for "
+            f"subscribers")
 
     @property
     def command_limit(self) -> int | None:
@@ -92,7 +95,7 @@ class MotionCommander(Node):
 
     def _finish(self) -> None:
         self._timer.cancel()
-        self.get_logger().info(f"done: {self._sent} commands sent")
+        self.get_logger().info(f"done: {plural(self._sent, 'command')} sent")
         if self._values["exit_when_done"]:
             raise SystemExit(0)
 

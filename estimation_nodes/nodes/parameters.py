@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from typing import Any, TypeVar
 
@@ -15,7 +16,8 @@ from rclpy.exceptions import ParameterException, ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from estimation_nodes.params.specs import UNSET, ParamSpec
+from estimation_nodes.nodes.rclpy_internals import parameter_overrides
+from estimation_nodes.params.specs import NODE_SPECS, UNSET, ParamSpec
 
 Settings = TypeVar("Settings")
 
@@ -86,8 +88,31 @@ def declare_and_build(
     whose message names the parameter.
     """
     declare_parameters(node, specs)
+    warn_unknown_parameters(node)
     values = parameter_values(node, specs)
     try:
         return values, build(values)
     except ValueError as error:
         raise ConfigurationError(str(error)) from None
+
+
+#: Parameters every rclpy node declares itself.
+RCLPY_PARAMETERS = ("use_sim_time", "start_type_description_service")
+
+
+def warn_unknown_parameters(node: Node) -> list[str]:
+    """Warn once of each given parameter that no node of this package declares.
+
+    A name another node of the package takes (``world`` given to the commander
+    by a shared ``/**`` section) is no mistake; a name none takes is, most
+    likely, a misspelling: the warning names the closest known one.
+    """
+    known = {spec.name for specs in NODE_SPECS.values() for spec in specs}
+    known.update(RCLPY_PARAMETERS)
+    unknown = sorted(set(parameter_overrides(node)) - known)
+    for name in unknown:
+        closest = difflib.get_close_matches(name, sorted(known), n=1)
+        hint = f"; did you mean '{closest[0]}'?" if closest else ""
+        node.get_logger().warning(
+            f"unknown parameter '{name}' ignored: no node of estimation_nodes has it{hint}")
+    return unknown

@@ -48,10 +48,17 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> i
     except SystemExit as done:
         code = int(done.code or 0)
     finally:
+        ignore_further_interrupts()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+def ignore_further_interrupts() -> None:
+    """Let a shutdown that has begun finish: a second Ctrl-C (a terminal and a launcher
+    both sending SIGINT) would otherwise break into it with a traceback."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 #: Set by a parent (estimation_demo) to its pid: the node then ends when that

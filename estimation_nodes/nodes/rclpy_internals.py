@@ -6,6 +6,9 @@ uses and fails with a message naming it. What is used and why:
 
 - ``RCLError`` (``rclpy._rclpy_pybind11``): what ``rclpy.init`` raises for a bad
   command line or parameter file; caught to print one line instead of a trace.
+- ``Node._parameter_overrides``: the values given to a node (``-p``, parameter
+  files, ``parameter_overrides=``), to warn of a misspelled name that no
+  declaration takes; rclpy has no public accessor for them.
 - ``EventHandle``, ``wait_set.add_event`` / ``is_ready("event", ...)`` and
   ``take_event``: to watch the estimator's input QoS events in one waitable
   (below). Keep this only while it measurably pays (bench/README.md, "idle
@@ -38,7 +41,14 @@ from rclpy.waitable import NumberOfEntities, Waitable
 MESSAGE_LOST = QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST
 INCOMPATIBLE_QOS = QoSSubscriptionEventType.RCL_SUBSCRIPTION_REQUESTED_INCOMPATIBLE_QOS
 
-__all__ = ["INCOMPATIBLE_QOS", "MESSAGE_LOST", "RCLError", "SubscriptionEvents"]
+__all__ = [
+    "INCOMPATIBLE_QOS", "MESSAGE_LOST", "RCLError", "SubscriptionEvents", "parameter_overrides",
+]
+
+
+def parameter_overrides(node: Any) -> list[str]:
+    """The names of every parameter value given to ``node`` from outside."""
+    return list(node._parameter_overrides)
 
 
 class SubscriptionEvents(Waitable):

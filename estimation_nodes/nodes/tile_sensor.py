@@ -14,6 +14,7 @@ from collections import deque
 from typing import Any
 
 import numpy as np
+from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from std_msgs.msg import Float64, Int32, Int64, String
 
@@ -27,17 +28,21 @@ from estimation_nodes.params import topics
 from estimation_nodes.params.builders import build_sensor_settings
 from estimation_nodes.params.specs import SENSOR_SPECS
 
-#: How often held readings are checked for a matched subscriber.
-FLUSH_PERIOD_S = 0.02
 #: Readings kept per topic while nobody listens; the oldest go first beyond that.
 HOLD_LIMIT = 1000
 
 
 class HeldPublisher:
-    """A publisher that keeps its messages while no subscription is matched."""
+    """A publisher that keeps its messages while no subscription is matched.
 
-    def __init__(self, publisher, hold: bool) -> None:
-        self._publisher = publisher
+    What it held goes out, in order, on DDS's matched event: nothing polls
+    while the sensor is idle.
+    """
+
+    def __init__(self, node: Node, msg_type: type, topic: str, hold: bool) -> None:
+        self._publisher = node.create_publisher(
+            msg_type, topic, INPUT_QOS,
+            event_callbacks=PublisherEventCallbacks(matched=lambda _info: self.flush()))
         self._hold = hold
         self._held: deque = deque(maxlen=HOLD_LIMIT)
 
@@ -80,11 +85,8 @@ class TileSensor(Node):
         qos = latched_qos(100)
         self._truth_pub = self.create_publisher(Int64, topics.TRUE_POSITION, qos)
         hold = bool(values["hold_until_matched"])
-        self._tile_pub = HeldPublisher(
-            self.create_publisher(String, topics.TILE_OBSERVATION, INPUT_QOS), hold)
-        self._measurement_pub = HeldPublisher(
-            self.create_publisher(Float64, topics.POSITION_MEASUREMENT, INPUT_QOS), hold)
-        self.create_timer(FLUSH_PERIOD_S, self._flush_held)
+        self._tile_pub = HeldPublisher(self, String, topics.TILE_OBSERVATION, hold)
+        self._measurement_pub = HeldPublisher(self, Float64, topics.POSITION_MEASUREMENT, hold)
         self.create_subscription(Int32, topics.MOTION_CMD, self._on_motion_cmd, INPUT_QOS)
         mode = "scripted" if self._scripted else f"random (seed {seed})"
         self.get_logger().info(f"ready: {self._model.size} cells, start cell "
@@ -109,9 +111,6 @@ class TileSensor(Node):
         if measurement is not None:
             self._measurement_pub.publish(Float64(data=measurement))
 
-    def _flush_held(self) -> None:
-        for publisher in (self._tile_pub, self._measurement_pub):
-            publisher.flush()
 
     def _scripted_item(self, script: tuple, step: int) -> Any:
         """The script's entry for this step; None once the script (or an empty one) ends."""

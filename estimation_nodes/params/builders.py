@@ -7,7 +7,7 @@ error is a ``ValueError`` whose message starts with the parameter's name.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -20,13 +20,21 @@ from estimation_nodes.core.models import (
     GaussianState,
     HistogramModel,
     LinearGaussianModel,
+    MotionKernel,
     ScalarKalmanModel,
     as_finite_array,
     check_belief,
+    check_covariance,
     check_finite,
-    check_positive,
+    check_probability_vector,
 )
-from estimation_nodes.params.specs import UNSET, WORLD_SPECS
+from estimation_nodes.params.specs import (
+    MAX_STATE,
+    MAX_VARIANCE,
+    MIN_VARIANCE,
+    UNSET,
+    WORLD_SPECS,
+)
 
 
 def as_list(name: str, value: Any) -> list:
@@ -70,9 +78,26 @@ def build_initial_belief(values: Mapping[str, Any], size: int) -> FloatArray:
     return check_belief("initial_belief", as_list("initial_belief", given), size)
 
 
+def _within(name: str, value: Any, low: float, high: float) -> float:
+    """A finite number in [low, high] (the bounds the parameter's descriptor states)."""
+    number = check_finite(name, value)
+    if not low <= number <= high:
+        raise ValueError(f"{name}: expected a number in [{low:g}, {high:g}], got {value!r}")
+    return number
+
+
+def _entries(name: str, flat: Any) -> FloatArray:
+    """A flat list of finite numbers within +-MAX_STATE."""
+    values = as_finite_array(name, as_list(name, flat), ndim=1)
+    if values.size and float(np.max(np.abs(values))) > MAX_STATE:
+        raise ValueError(f"{name}: expected entries within +-{MAX_STATE:g}, "
+                         f"got {float(np.max(np.abs(values))):g}")
+    return values
+
+
 def _matrix(name: str, flat: Any, rows: int) -> FloatArray:
     """Reshape a row-major flat list into ``rows`` rows, naming the parameter on error."""
-    values = as_finite_array(name, as_list(name, flat), ndim=1)
+    values = _entries(name, flat)
     if rows < 1 or values.size == 0 or values.size % rows != 0:
         raise ValueError(
             f"{name}: expected a row-major matrix with {rows} rows, got {values.size} values"
@@ -99,16 +124,21 @@ def build_kalman_settings(values: Mapping[str, Any]) -> KalmanSettings:
     Both the scalar and the matrix parameters are validated whatever the mode,
     so a bad value is refused when it is set, not when the mode changes.
     """
-    mode = values["kalman.mode"]
-    x0 = check_finite("kalman.x0", values["kalman.x0"])
-    P0 = check_positive("kalman.P0", values["kalman.P0"])
-    scalar = ScalarKalmanModel(values["kalman.var_u"], values["kalman.var_z"])
+    mode = _kalman_mode("kalman.mode", values["kalman.mode"])
+    x0 = _within("kalman.x0", values["kalman.x0"], -MAX_STATE, MAX_STATE)
+    P0, var_u, var_z = (_within(name, values[name], MIN_VARIANCE, MAX_VARIANCE)
+                        for name in ("kalman.P0", "kalman.var_u", "kalman.var_z"))
+    scalar = ScalarKalmanModel(var_u, var_z)
     matrix_initial, matrix = _build_matrix_model(values, "kalman.matrix.")
     if mode == "scalar":
         return KalmanSettings(GaussianState(np.array([x0]), np.array([[P0]])), scalar)
-    if mode == "matrix":
-        return KalmanSettings(matrix_initial, matrix)
-    raise ValueError(f"kalman.mode: expected 'scalar' or 'matrix', got {mode!r}")
+    return KalmanSettings(matrix_initial, matrix)
+
+
+def _kalman_mode(name: str, value: Any) -> str:
+    if value not in ("scalar", "matrix"):
+        raise ValueError(f"{name}: expected 'scalar' or 'matrix', got {value!r}")
+    return value
 
 
 def _build_matrix_model(
@@ -116,7 +146,7 @@ def _build_matrix_model(
 ) -> tuple[GaussianState, LinearGaussianModel]:
     """The matrix filter's initial state and model; errors name the full parameter."""
     try:
-        x0 = as_finite_array("x0", as_list(prefix + "x0", values[prefix + "x0"]), ndim=1)
+        x0 = _entries("x0", values[prefix + "x0"])
         n = x0.size
         initial = GaussianState(x0, _matrix("P0", values[prefix + "P0"], n))
         model = LinearGaussianModel(
@@ -174,7 +204,70 @@ def build_estimator_settings(
     else:
         model = build_histogram_model(values)
         initial_belief = build_initial_belief(values, model.size)
+    _non_empty_text("frame_id", values["frame_id"])
     return EstimatorSettings(model, initial_belief, build_kalman_settings(values))
+
+
+def _non_empty_text(name: str, value: Any) -> str:
+    if not isinstance(value, str) or not value.strip():
+        raise ValueError(f"{name}: expected a non-empty name, got {value!r}")
+    return value
+
+
+def _class_names(name: str, value: Any) -> None:
+    for item in as_list(name, value):
+        _non_empty_text(name, item)
+
+
+def _stochastic_square(name: str, value: Any) -> None:
+    """k x k probabilities, each row summing to 1 (k is the number of classes, set apart)."""
+    matrix = _square(name, value)
+    for index, row in enumerate(matrix):
+        check_probability_vector(f"{name} (row {index})", row)
+
+
+def _covariance(name: str, value: Any) -> None:
+    matrix = _square(name, value)
+    check_covariance(name, matrix, matrix.shape[0])
+
+
+def _prior(name: str, value: Any) -> None:
+    if value is not UNSET and len(value):
+        check_belief(name, as_list(name, value), len(value))
+
+
+#: What can be said of one estimator parameter's value without the others. A change
+#: that passes this is accepted; whether it fits the other parameters (the sensor
+#: model's size, the prior's length, the matrices' shapes) is the whole set's
+#: question, answered by build_estimator_settings.
+_ALONE: dict[str, Callable[[str, Any], object]] = {
+    "world": _class_names,
+    "classes": _class_names,
+    "sensor_model": _stochastic_square,
+    "motion_kernel": lambda name, value: MotionKernel(np.asarray(as_list(name, value), float)),
+    "initial_belief": _prior,
+    "kalman.mode": _kalman_mode,
+    "kalman.x0": lambda name, value: _within(name, value, -MAX_STATE, MAX_STATE),
+    "kalman.P0": lambda name, value: _within(name, value, MIN_VARIANCE, MAX_VARIANCE),
+    "kalman.var_u": lambda name, value: _within(name, value, MIN_VARIANCE, MAX_VARIANCE),
+    "kalman.var_z": lambda name, value: _within(name, value, MIN_VARIANCE, MAX_VARIANCE),
+    "kalman.matrix.x0": _entries,
+    "kalman.matrix.P0": _covariance,
+    "kalman.matrix.A": _square,
+    "kalman.matrix.B": _entries,
+    "kalman.matrix.C": _entries,
+    "kalman.matrix.F": _entries,
+    "kalman.matrix.Q": _covariance,
+    "kalman.matrix.R": _covariance,
+    "frame_id": _non_empty_text,
+}
+
+
+def check_estimator_value(name: str, value: Any) -> None:
+    """Raise ValueError if one parameter's value is wrong whatever the others are."""
+    check = _ALONE.get(name)
+    if check is not None:
+        check(name, value)
 
 
 @dataclass(frozen=True)
@@ -195,8 +288,8 @@ class SensorSettings:
 def build_sensor_settings(values: Mapping[str, Any]) -> SensorSettings:
     """The tile sensor's settings; scripted classes must be classes of the model."""
     model = build_histogram_model(values)
-    noise_std = float(np.sqrt(check_positive(
-        "measurement_variance", values["measurement_variance"])))
+    noise_std = float(np.sqrt(_within("measurement_variance", values["measurement_variance"],
+                                      MIN_VARIANCE, MAX_VARIANCE)))
     observations = tuple(values["scripted_observations"] or ())
     for name in observations:
         try:
@@ -217,8 +310,21 @@ class CommanderSettings:
     limit: int | None
 
 
+#: motion_cmd is std_msgs/Int32.
+INT32_RANGE = (-(2**31), 2**31 - 1)
+
+
 def build_commander_settings(values: Mapping[str, Any]) -> CommanderSettings:
-    commands = tuple(int(c) for c in as_list("commands", values["commands"]))
+    given = values["commands"]
+    if given is UNSET or not hasattr(given, "__len__") or isinstance(given, (str, bytes)) \
+            or len(given) == 0:
+        raise ValueError("commands: expected a list of at least one integer, got none")
+    commands = tuple(int(c) for c in given)
+    low, high = INT32_RANGE
+    outside = [c for c in commands if not low <= c <= high]
+    if outside:
+        raise ValueError(f"commands: {outside[0]} does not fit motion_cmd (std_msgs/Int32: "
+                         f"{low}..{high})")
     limit = values["max_commands"] or None
     if not values["repeat"]:
         limit = min(limit or len(commands), len(commands))

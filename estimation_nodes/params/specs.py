@@ -51,6 +51,14 @@ WORLD_SPECS = (
               "(odd length, centred, sums to 1)."),
 )
 
+#: Bounds on what the Kalman parameters accept. With variances and states within
+#: these, no step can overflow a double before some 1e290 steps; a result that
+#: would still not be finite (from an extreme measurement) is dropped by the filter.
+MAX_STATE = 1e12
+MIN_VARIANCE = 1e-12
+MAX_VARIANCE = 1e12
+_ENTRIES = f" Entries within +-{MAX_STATE:g}."
+
 ESTIMATOR_SPECS = WORLD_SPECS + (
     ParamSpec("initial_belief", UNSET,
               "Prior over the cells (normalized); leave unset for a uniform prior.",
@@ -58,24 +66,34 @@ ESTIMATOR_SPECS = WORLD_SPECS + (
     ParamSpec("kalman.mode", "scalar",
               "'scalar': the book's Algorithm 4 with kalman.x0/P0/var_u/var_z; 'matrix': "
               "the matrix filter with kalman.matrix.*.", read_only=True),
-    ParamSpec("kalman.x0", 0.0, "Initial position estimate (cells) of the scalar filter."),
-    ParamSpec("kalman.P0", 100.0, "Initial variance of the scalar filter (> 0).",),
-    ParamSpec("kalman.var_u", 2.0, "Variance of an executed move (> 0)."),
-    ParamSpec("kalman.var_z", 4.0, "Variance of a position measurement (> 0)."),
+    ParamSpec("kalman.x0", 0.0, "Initial position estimate (cells) of the scalar filter.",
+              min_value=-MAX_STATE, max_value=MAX_STATE),
+    ParamSpec("kalman.P0", 100.0, "Initial variance of the scalar filter.",
+              min_value=MIN_VARIANCE, max_value=MAX_VARIANCE),
+    ParamSpec("kalman.var_u", 2.0, "Variance of an executed move.",
+              min_value=MIN_VARIANCE, max_value=MAX_VARIANCE),
+    ParamSpec("kalman.var_z", 4.0, "Variance of a position measurement.",
+              min_value=MIN_VARIANCE, max_value=MAX_VARIANCE),
     ParamSpec("kalman.matrix.x0", [0.0], "Matrix mode: initial state; its length n sets the "
-              "state size. Component 0 is published as the position."),
-    ParamSpec("kalman.matrix.P0", [100.0], "Matrix mode: initial covariance, n x n row-major."),
-    ParamSpec("kalman.matrix.A", [1.0], "Matrix mode: transition matrix A, n x n row-major."),
+              f"state size. Component 0 is published as the position.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.P0", [100.0],
+              f"Matrix mode: initial covariance, n x n row-major.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.A", [1.0],
+              f"Matrix mode: transition matrix A, n x n row-major.{_ENTRIES}"),
     ParamSpec("kalman.matrix.B", [1.0], "Matrix mode: input matrix B, n x 1 (u is the "
-              "motion command)."),
-    ParamSpec("kalman.matrix.C", [1.0], "Matrix mode: measurement matrix C, 1 x n."),
-    ParamSpec("kalman.matrix.F", [1.0], "Matrix mode: noise-input matrix F, n x q row-major."),
-    ParamSpec("kalman.matrix.Q", [2.0], "Matrix mode: process noise covariance, q x q."),
-    ParamSpec("kalman.matrix.R", [4.0], "Matrix mode: measurement noise variance, 1 x 1."),
-    ParamSpec("frame_id", "map", "frame_id of kalman_estimate_stamped."),
-    ParamSpec("history_depth", 100,
-              "How many past estimates each output topic keeps for late subscribers "
-              "(transient_local). Lower it for very large worlds.", read_only=True,
+              f"motion command).{_ENTRIES}"),
+    ParamSpec("kalman.matrix.C", [1.0], f"Matrix mode: measurement matrix C, 1 x n.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.F", [1.0],
+              f"Matrix mode: noise-input matrix F, n x q row-major.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.Q", [2.0],
+              f"Matrix mode: process noise covariance, q x q.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.R", [4.0],
+              f"Matrix mode: measurement noise variance, 1 x 1.{_ENTRIES}"),
+    ParamSpec("frame_id", "map", "frame_id of kalman_estimate_stamped (not empty)."),
+    ParamSpec("history_depth", 1,
+              "How many of the latest estimates each output topic keeps for late subscribers "
+              "(transient_local): 1 hands a late `ros2 topic echo` the latest, as /map or "
+              "/amcl_pose do; more replays that many, oldest first.", read_only=True,
               min_value=1, max_value=100000),
     ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics messages.",
               read_only=True, min_value=0.01, max_value=3600.0),
@@ -100,8 +118,8 @@ SENSOR_SPECS = WORLD_SPECS + (
     ParamSpec("seed", -1, "Seed of the random motion and sensor noise; -1 draws one from the "
               "operating system.", read_only=True),
     ParamSpec("measurement_variance", 4.0,
-              "Variance of the Gaussian noise on position_measurement (cells^2, > 0).",
-              read_only=True),
+              "Variance of the Gaussian noise on position_measurement (cells^2).",
+              read_only=True, min_value=MIN_VARIANCE, max_value=MAX_VARIANCE),
     ParamSpec("scripted_observations", UNSET,
               "Scripted mode: tile classes to publish, one per command, instead of sampling.",
               read_only=True, type_name="string_array"),

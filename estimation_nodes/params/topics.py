@@ -14,6 +14,8 @@ BELIEF_PREDICTED = "belief_predicted"
 BELIEF = "belief"
 KALMAN_ESTIMATE = "kalman_estimate"
 KALMAN_ESTIMATE_STAMPED = "kalman_estimate_stamped"
+KALMAN_ESTIMATE_PREDICTED = "kalman_estimate_predicted"
+KALMAN_ESTIMATE_PREDICTED_STAMPED = "kalman_estimate_predicted_stamped"
 
 #: What drives the estimator, in the order it subscribes (commands first).
 INPUTS = (MOTION_CMD, TILE_OBSERVATION, POSITION_MEASUREMENT)
@@ -28,4 +30,6 @@ TOPIC_TYPES = {
     BELIEF: "std_msgs/msg/Float64MultiArray",
     KALMAN_ESTIMATE: "geometry_msgs/msg/PoseWithCovariance",
     KALMAN_ESTIMATE_STAMPED: "geometry_msgs/msg/PoseWithCovarianceStamped",
+    KALMAN_ESTIMATE_PREDICTED: "geometry_msgs/msg/PoseWithCovariance",
+    KALMAN_ESTIMATE_PREDICTED_STAMPED: "geometry_msgs/msg/PoseWithCovarianceStamped",
 }

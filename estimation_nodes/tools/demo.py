@@ -30,6 +30,9 @@ NODE_MODULES = {
     "tile_sensor": "estimation_nodes.nodes.tile_sensor",
     "motion_commander": "estimation_nodes.nodes.motion_commander",
 }
+#: A run where localization visibly succeeds; the book's own world and examples are
+#: other scenarios, named in the summary.
+DEFAULT_SCENARIO = "localization"
 #: Start order: the commander last, so it finds the others soonest.
 START_ORDER = ("estimator", "tile_sensor", "motion_commander")
 #: Subscribers the commander waits for: the sensor, the estimator and this script's monitor.
@@ -56,8 +59,19 @@ def find_scenario(name: str) -> Path:
         candidate = directory / f"{name}.yaml"
         if candidate.is_file():
             return candidate
-    known = sorted({p.stem for d in scenario_dirs() for p in d.glob("*.yaml")})
-    raise DemoError(f"--scenario: no scenario named {name!r}; known scenarios: {known}")
+    raise DemoError(f"--scenario: no scenario named {name!r}; known scenarios: "
+                    f"{known_scenarios()}")
+
+
+def known_scenarios() -> list[str]:
+    return sorted({p.stem for d in scenario_dirs() for p in d.glob("*.yaml")})
+
+
+def other_scenarios(ran: Path) -> str:
+    """The line that tells a newcomer where the book's examples are."""
+    others = [name for name in known_scenarios() if name != ran.stem]
+    return (f"  other scenarios: {', '.join(others)} (estimation_demo --scenario NAME; "
+            f"book_world and example_* are the textbook's world and worked examples)")
 
 
 def checked_params_file(path: Path) -> Path:
@@ -83,7 +97,7 @@ def ros_environment() -> dict[str, str]:
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="estimation_demo", description=__doc__.split("\n")[0])
     source = parser.add_mutually_exclusive_group()
-    source.add_argument("--scenario", default="default",
+    source.add_argument("--scenario", default=DEFAULT_SCENARIO,
                         help="scenario name from msgs_config (default: %(default)s)")
     source.add_argument("--params-file", type=Path, help="a ROS parameter file of your own")
     parser.add_argument("--settle", type=float, default=2.0,
@@ -130,6 +144,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         print(f"estimation_demo: {error}", file=sys.stderr)
         sys.exit(2)
     print(summarize(record))
+    print(other_scenarios(params))
     if args.record:
         print(f"estimation_demo: recorded to {args.record}")
     if args.plot:
@@ -161,7 +176,7 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from estimation_nodes.nodes.process import PARENT_PID_ENV
+    from estimation_nodes.nodes.process import PARENT_PID_ENV, ignore_further_interrupts
 
     processes: dict[str, subprocess.Popen] = {}
     rclpy.init()
@@ -182,8 +197,10 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
             if name == "motion_commander":
                 command += commander_overrides(args.settle, exit_when_done=True)
             # The children end with the demo even if it is killed (nodes/process.end_with_parent).
+            # Each in a process group of its own: a terminal's Ctrl-C then reaches the demo
+            # alone, which stops each child with exactly one SIGINT.
             processes[name] = subprocess.Popen(
-                command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())})
+                command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())}, process_group=0)
         commander = processes["motion_commander"]
         finished = spin_until(executor, lambda: any(p.poll() is not None
                                                     for p in processes.values()),
@@ -202,6 +219,7 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
         print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
         code = 130
     finally:
+        ignore_further_interrupts()
         for name in reversed(START_ORDER):
             if name in processes:
                 stop_process(processes[name])
@@ -222,6 +240,7 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     from estimation_nodes.nodes.motion_commander import MotionCommander
     from estimation_nodes.nodes.tile_sensor import TileSensor
     from estimation_nodes.nodes.parameters import ConfigurationError
+    from estimation_nodes.nodes.process import ignore_further_interrupts
 
     ros_args = ["--ros-args", "--params-file", str(params),
                 *commander_overrides(args.settle, exit_when_done=False)]
@@ -251,6 +270,7 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     except KeyboardInterrupt:
         code = 130
     finally:
+        ignore_further_interrupts()
         for node in nodes:
             node.destroy_node()
         if writer is not None:

@@ -56,6 +56,9 @@ class RunMonitor(Node):
             topics.BELIEF: self._on_corrected,
             topics.KALMAN_ESTIMATE: self._on_kalman,
             topics.KALMAN_ESTIMATE_STAMPED: lambda msg: None,
+            topics.KALMAN_ESTIMATE_PREDICTED: lambda msg: self.record.kalman_predicted.append(
+                (msg.pose.position.x, msg.covariance[0])),
+            topics.KALMAN_ESTIMATE_PREDICTED_STAMPED: lambda msg: None,
         }
         for topic in topics.INPUTS:
             handlers[topic] = lambda msg, t=topic: self.record.add_event(t, msg.data)

@@ -132,8 +132,10 @@ def _add_decoded(record: RunRecord, topic: str, msg: object) -> None:
     elif base in (topics.BELIEF_PREDICTED, topics.BELIEF):
         values = np.asarray(msg.data, dtype=np.float64)
         (record.predicted if base == topics.BELIEF_PREDICTED else record.corrected).append(values)
-    elif base == topics.KALMAN_ESTIMATE:
-        record.kalman.append((msg.pose.position.x, msg.covariance[0]))
+    elif base in (topics.KALMAN_ESTIMATE, topics.KALMAN_ESTIMATE_PREDICTED):
+        estimate = (msg.pose.position.x, msg.covariance[0])
+        (record.kalman if base == topics.KALMAN_ESTIMATE else record.kalman_predicted).append(
+            estimate)
 
 
 def read_recording(path: Path) -> Recording:

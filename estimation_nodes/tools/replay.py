@@ -29,6 +29,7 @@ from estimation_nodes.params import topics
 from estimation_nodes.params.builders import build_estimator_settings
 from estimation_nodes.params.files import check_params_file, read_node_parameters
 from estimation_nodes.params.specs import ESTIMATOR_SPECS, spec_defaults
+from estimation_nodes.params.wording import plural
 from estimation_nodes.tools.recording import Recording, RecordingError, read_recording
 
 
@@ -91,13 +92,24 @@ def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comp
     kalman = KalmanFilter(settings.kalman.initial, settings.kalman.model)
     run = recording.record
     comparison = Comparison()
-    counts = {topics.BELIEF_PREDICTED: 0, topics.BELIEF: 0, topics.KALMAN_ESTIMATE: 0}
+    recorded = ((topics.BELIEF_PREDICTED, run.predicted), (topics.BELIEF, run.corrected),
+                (topics.KALMAN_ESTIMATE_PREDICTED, run.kalman_predicted),
+                (topics.KALMAN_ESTIMATE, run.kalman))
+    counts = {output: 0 for output, _ in recorded}
+
+    def check(output: str, online: list, offline) -> None:
+        index = counts[output]
+        counts[output] += 1
+        comparison.check(output, index, _at(online, index), offline, tolerance)
+
     for topic, value in run.events:
         try:
             if topic == topics.MOTION_CMD:
                 belief.predict(value)
-                kalman.predict(float(value))
-                output, online, offline = topics.BELIEF_PREDICTED, run.predicted, belief.belief
+                check(topics.BELIEF_PREDICTED, run.predicted, belief.belief)
+                estimate = kalman.predict(float(value))
+                output, online, offline = (topics.KALMAN_ESTIMATE_PREDICTED,
+                                           run.kalman_predicted, tuple(estimate))
             elif topic == topics.TILE_OBSERVATION:
                 belief.correct(value)
                 output, online, offline = topics.BELIEF, run.corrected, belief.belief
@@ -106,11 +118,7 @@ def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comp
                 output, online, offline = topics.KALMAN_ESTIMATE, run.kalman, tuple(estimate)
         except ValueError:
             continue   # the estimator rejected it too, and published nothing
-        index = counts[output]
-        counts[output] += 1
-        comparison.check(output, index, _at(online, index), offline, tolerance)
-    recorded = ((topics.BELIEF_PREDICTED, run.predicted), (topics.BELIEF, run.corrected),
-                (topics.KALMAN_ESTIMATE, run.kalman))
+        check(output, online, offline)
     for output, online in recorded:
         for index in range(counts[output], len(online)):
             comparison.differences.append(
@@ -137,7 +145,7 @@ def main(argv: list[str] | None = None) -> None:
         print(f"estimation_replay: {error}", file=sys.stderr)
         sys.exit(2)
     for topic, count in sorted(recording.counts.items()):
-        print(f"  {topic}: {count} messages")
+        print(f"  {topic}: {plural(count, 'message')}")
     for topic, count in comparison.compared.items():
         print(f"{topic}: {count} estimates compared, largest difference "
               f"{comparison.worst.get(topic, float('nan')):.3g}")

@@ -25,6 +25,7 @@ class RunRecord:
     predicted: list[FloatArray] = field(default_factory=list)
     corrected: list[FloatArray] = field(default_factory=list)
     kalman: list[tuple[float, float]] = field(default_factory=list)
+    kalman_predicted: list[tuple[float, float]] = field(default_factory=list)
     #: Input events in the order they were recorded: ("motion_cmd", u), ("tile_observation",
     #: class) or ("position_measurement", z).
     events: list[tuple[str, object]] = field(default_factory=list)

@@ -26,7 +26,8 @@ def node_command(name: str, scenario: Path, *args: str) -> list[str]:
     return [executable(name), "--ros-args", "--params-file", str(scenario), *args]
 
 
-def start_graph(processes, scenario: Path, *commander_args: str, skip=(), listeners=None):
+def start_graph(processes, scenario: Path, *commander_args: str, skip=(), listeners=None,
+                estimator_args=()):
     """Start the three nodes (minus ``skip``); the commander exits after its last command.
 
     ``listeners`` is ``(executor, collector)``: the commander, which sets the run
@@ -39,7 +40,8 @@ def start_graph(processes, scenario: Path, *commander_args: str, skip=(), listen
     for name in NODES:
         if name in skip or name == "motion_commander":
             continue
-        started[name] = processes(node_command(name, scenario))
+        extra = estimator_args if name == "estimator" else ()
+        started[name] = processes(node_command(name, scenario, *extra))
     if listeners is not None:
         executor, collector = listeners
         assert spin_until(executor, collector.all_matched, 30.0), \

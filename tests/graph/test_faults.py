@@ -211,11 +211,24 @@ def test_flood_is_handled_or_counted_memory_bounded_then_correct_again(
                                [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
 
 
-def test_late_subscriber_gets_the_latest_estimates(processes, executor, collector_factory):
+def test_late_subscriber_gets_the_latest_estimate(processes, executor, collector_factory):
     started = start_graph(processes, SCENARIOS / "example_6_14.yaml")
     wait_for_commander(executor, started)
     wait_seconds(executor, 0.5)
-    # Joins after the last estimate was published.
+    # Joins after the last estimate was published: gets that one, as from /map.
+    late = collector_factory({"belief": Float64MultiArray}, name="late_subscriber")
+    assert spin_until(executor, lambda: late.count("belief") >= 1, 20.0)
+    wait_seconds(executor, 0.5)
+    assert late.count("belief") == 1
+    np.testing.assert_allclose(beliefs(late.messages["belief"])[-1],
+                               [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
+
+
+def test_late_subscriber_gets_a_history_when_asked_for(processes, executor, collector_factory):
+    started = start_graph(processes, SCENARIOS / "example_6_14.yaml",
+                          estimator_args=("-p", "history_depth:=100"))
+    wait_for_commander(executor, started)
+    wait_seconds(executor, 0.5)
     late = collector_factory({"belief": Float64MultiArray}, name="late_subscriber")
     assert spin_until(executor, lambda: late.count("belief") >= 3, 20.0)
     np.testing.assert_allclose(beliefs(late.messages["belief"])[-1],
@@ -245,7 +258,7 @@ def test_command_publishers_that_come_and_go(processes, executor, context, colle
     (["-p", "sensor_model:=[0.8, 0.2, 0.4]"], "sensor_model"),
     (["-p", "world:=[bright, purple]"], "purple"),
     (["-p", "initial_belief:=[1.0, 2.0]"], "initial_belief: expected 5 values"),
-    (["-p", "kalman.var_z:=-4.0"], "var_z: expected a number > 0"),
+    (["-p", "kalman.var_z:=-4.0"], "kalman.var_z out of range Min: 1e-12"),
     (["-p", "kalman.matrix.Q:=[1.0, 2.0, 2.0, 1.0]"], "kalman.matrix.Q"),
 ])
 def test_bad_start_up_parameters_exit_2_naming_the_parameter(ros_env, args, message):

@@ -35,7 +35,7 @@ def test_ros2_run_finds_every_executable():
 
     assert parse_package(str(share / "package.xml")).name == "estimation_nodes"
     assert {p.name for p in (share / "msgs_config").glob("*.yaml")} >= {
-        "default.yaml", "example_6_14.yaml", "example_6_18.yaml"}
+        "book_world.yaml", "example_6_14.yaml", "example_6_18.yaml"}
 
 
 def test_source_package_xml_parses():
@@ -168,7 +168,7 @@ def start_demo(ros_env, *args, **popen_args) -> tuple[subprocess.Popen, list[int
 
 
 def test_demo_ctrl_c_leaves_no_process_behind(ros_env, domain_id):
-    demo, children = start_demo(ros_env, "--scenario", "default", "--settle", "0.5",
+    demo, children = start_demo(ros_env, "--scenario", "book_world", "--settle", "0.5",
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         assert len(children) == 3
@@ -176,6 +176,25 @@ def test_demo_ctrl_c_leaves_no_process_behind(ros_env, domain_id):
         output, _ = demo.communicate(timeout=30)
         assert demo.returncode == 130, output
         assert "summary:" in output
+        assert not [child for child in children if running(child)]
+    finally:
+        if demo.poll() is None:
+            demo.kill()
+            demo.wait()
+
+
+def test_ctrl_c_in_a_terminal_ends_every_process_quietly(ros_env, domain_id):
+    """A terminal's Ctrl-C signals the whole foreground process group at once."""
+    demo, children = start_demo(ros_env, "--scenario", "book_world", "--settle", "0.5",
+                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                                start_new_session=True)
+    try:
+        assert len(children) == 3
+        time.sleep(1.0)   # the nodes are up and running, as a user would see them
+        os.killpg(demo.pid, signal.SIGINT)
+        output, _ = demo.communicate(timeout=30)
+        assert demo.returncode == 130, output
+        assert "Traceback" not in output, output
         assert not [child for child in children if running(child)]
     finally:
         if demo.poll() is None:
@@ -255,7 +274,7 @@ def test_ctrl_c_ends_a_node_cleanly(processes, executor, collector_factory, name
 
 @pytest.mark.parametrize("name, message", [
     ("../../etc/hosts", "is not a scenario name"),
-    ("no_such_scenario", "known scenarios: ['default', 'example_6_14'"),
+    ("no_such_scenario", "known scenarios: ['book_world', 'example_6_14'"),
 ])
 def test_demo_rejects_bad_scenario_names(ros_env, name, message):
     result = subprocess.run([executable("estimation_demo"), "--scenario", name], env=ros_env,

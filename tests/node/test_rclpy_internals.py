@@ -55,3 +55,17 @@ def test_an_event_handle_can_be_made_waited_on_and_taken(context):
     finally:
         executor.shutdown()
         node.destroy_node()
+
+
+def test_the_overrides_given_to_a_node_can_be_read(context):
+    from rclpy.parameter import Parameter
+
+    from estimation_nodes.nodes.rclpy_internals import parameter_overrides
+
+    node = Node("overrides_probe", context=context,
+                parameter_overrides=[Parameter("given", value=1)])
+    try:
+        assert "given" in parameter_overrides(node), (
+            "rclpy changed: Node._parameter_overrides no longer holds the given values")
+    finally:
+        node.destroy_node()
