@@ -5,6 +5,10 @@
 A driver node (this process) publishes ``tile_observation`` and waits for
 the answer: the estimator's corrected ``belief`` (N = 5, the book's world),
 or the same String back from bench/relay_node.py on ``relay_out``. The
+matrix filter's path is measured the same way (latency only): a 2-value
+``kalman_measurement`` to the estimator in the tracking_2d scenario (4
+states, 2 inputs, 2 outputs) answered on ``kalman_state``, against the relay's
+``relay_vector_out``. The
 estimator and the relay run as separate processes, one at a time, in
 alternating rounds, so both see the same machine. Latency: one message in
 flight, publish to receipt, p50 and p99. Throughput: a window of 100 in
@@ -36,10 +40,13 @@ BENCH = Path(__file__).resolve().parent
 WINDOW = 100
 
 
-def start(kind: str, env: dict) -> subprocess.Popen:
+TRACKING = BENCH.parent / "msgs_config" / "tracking_2d.yaml"
+
+
+def start(kind: str, env: dict, params: tuple[str, ...] = ()) -> subprocess.Popen:
     if kind == "estimator":
         command = [sys.executable, "-m", "estimation_nodes.nodes.estimator", "--ros-args",
-                   "-p", "history_depth:=1000", "--log-level", "warn"]
+                   *params, "-p", "history_depth:=1000", "--log-level", "warn"]
     else:
         command = [sys.executable, str(BENCH / "relay_node.py")]
     return subprocess.Popen(command, env=env)
@@ -48,11 +55,12 @@ def start(kind: str, env: dict) -> subprocess.Popen:
 class Driver:
     """Publishes observations and counts answers on one topic."""
 
-    def __init__(self, answer_topic: str, answer_type, qos) -> None:
+    def __init__(self, answer_topic: str, answer_type, qos, vectors: bool = False) -> None:
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
-        from std_msgs.msg import String
+        from std_msgs.msg import Float64MultiArray, String
 
+        from estimation_nodes.nodes.messages import to_multiarray
         from estimation_nodes.nodes.qos import INPUT_QOS
 
         self.node = Node(f"bench_driver_{answer_topic}")
@@ -60,9 +68,14 @@ class Driver:
         self.executor.add_node(self.node)
         self.received = 0
         self.arrivals: list[int] = []
-        self.pub = self.node.create_publisher(String, "tile_observation", INPUT_QOS)
         self.node.create_subscription(answer_type, answer_topic, self._on_answer, qos)
-        self.messages = [String(data=name) for name in ("dark", "bright")]
+        if vectors:   # position measurements of the tracking scenario
+            self.pub = self.node.create_publisher(
+                Float64MultiArray, "kalman_measurement", INPUT_QOS)
+            self.messages = [to_multiarray(np.array(z), "z") for z in ([0.1, 0.2], [0.3, 0.1])]
+        else:
+            self.pub = self.node.create_publisher(String, "tile_observation", INPUT_QOS)
+            self.messages = [String(data=name) for name in ("dark", "bright")]
 
     def _on_answer(self, _msg) -> None:
         self.arrivals.append(time.perf_counter_ns())
@@ -79,7 +92,7 @@ class Driver:
     def connect(self, timeout: float = 30.0) -> None:
         """Matched both ways, and one answer received (the whole path is up)."""
         if not self.wait_until(lambda: self.pub.get_subscription_count() >= 1, timeout):
-            raise RuntimeError("no subscriber on tile_observation")
+            raise RuntimeError(f"no subscriber on {self.pub.topic_name}")
         self.pub.publish(self.messages[0])
         if not self.wait_until(lambda: self.received >= 1, timeout):
             raise RuntimeError("no answer")
@@ -146,6 +159,24 @@ def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float, float
         stop_process(process)
 
 
+def measure_matrix_latency(kind: str, env: dict, events: int) -> np.ndarray:
+    """kalman_measurement -> kalman_state of the tracking filter, or the relay's echo."""
+    from std_msgs.msg import Float64MultiArray
+
+    from estimation_nodes.nodes.qos import latched_qos
+
+    process = start(kind, env, ("--params-file", str(TRACKING)))
+    answer = "kalman_state" if kind == "estimator" else "relay_vector_out"
+    driver = Driver(answer, Float64MultiArray, latched_qos(1000), vectors=True)
+    try:
+        driver.connect()
+        driver.latency(200)   # warm-up
+        return driver.latency(events)
+    finally:
+        driver.close()
+        stop_process(process)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--events", type=int, default=3000)
@@ -157,6 +188,7 @@ def main() -> None:
     rclpy.init()
     results: dict[str, dict[str, list]] = {k: {"lat": [], "rate": [], "cpu": []}
                                            for k in ("estimator", "relay")}
+    matrix: dict[str, list] = {"estimator": [], "relay": []}
     try:
         for _ in range(args.rounds):
             for kind in ("relay", "estimator"):
@@ -164,6 +196,7 @@ def main() -> None:
                 results[kind]["lat"].append(latencies)
                 results[kind]["rate"].append(rate)
                 results[kind]["cpu"].append(cpu)
+                matrix[kind].append(measure_matrix_latency(kind, env, args.events // 3))
     finally:
         rclpy.try_shutdown()
     rows = []
@@ -184,6 +217,14 @@ def main() -> None:
     print(f"estimator / relay: p50 {np.percentile(est, 50) / np.percentile(rel, 50):.2f}, "
           f"p99 {np.percentile(est, 99) / np.percentile(rel, 99):.2f}, "
           f"throughput {ratio_rate:.2f} (by CPU per event: {ratio_cpu:.2f})")
+    est, rel = np.concatenate(matrix["estimator"]), np.concatenate(matrix["relay"])
+    print("Matrix filter (tracking_2d: 4 states, 2 inputs, 2 outputs), latency "
+          "kalman_measurement -> kalman_state against the relay's echo")
+    print(table(["node", "latency p50 (us)", "latency p99 (us)"],
+                [[kind, f"{np.percentile(lat, 50):.0f}", f"{np.percentile(lat, 99):.0f}"]
+                 for kind, lat in (("estimator", est), ("relay", rel))]))
+    print(f"estimator / relay: p50 {np.percentile(est, 50) / np.percentile(rel, 50):.2f}, "
+          f"p99 {np.percentile(est, 99) / np.percentile(rel, 99):.2f}")
 
 
 if __name__ == "__main__":

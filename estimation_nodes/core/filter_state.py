@@ -9,6 +9,7 @@ the same numbers from the same inputs.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -113,39 +114,55 @@ class KalmanFilter:
 
     @property
     def estimate(self) -> PositionEstimate:
+        """State component 0 and its variance: the position of the 1-D examples."""
         return PositionEstimate(float(self.x[0]), float(self.P[0, 0]))
 
-    def predict(self, u: float) -> PositionEstimate:
-        """Predict with a move ``u``; raises ValueError (non-finite u, or a result that would
-        not be finite) and then changes nothing."""
+    @property
+    def input_size(self) -> int:
+        """m: how many values one input (u) has."""
+        model = self._model
+        return 1 if isinstance(model, ScalarKalmanModel) else model.input_size
+
+    @property
+    def measurement_size(self) -> int:
+        """p: how many values one measurement (z) has."""
+        model = self._model
+        return 1 if isinstance(model, ScalarKalmanModel) else model.measurement_size
+
+    def predict(self, u: float | Sequence[float]) -> PositionEstimate:
+        """Predict with an input ``u`` (a number, or m values); raises ValueError (wrong
+        size, non-finite u, or a result that would not be finite) and then changes nothing."""
         model = self._model
         if isinstance(model, ScalarKalmanModel):
-            x, var = kalman.predict_scalar(float(self.x[0]), float(self.P[0, 0]), u, model.var_u)
+            x, var = kalman.predict_scalar(
+                float(self.x[0]), float(self.P[0, 0]), _one("u", u), model.var_u)
             self._commit(np.array([x]), np.array([[var]]))
         else:
             with _overflow_checked_by_commit():
-                self._commit(*kalman.predict(self.x, self.P, [u], model))
+                x_new, P_new = kalman.predict(self.x, self.P, u, model)
+            self._commit(x_new, P_new)
         return self.estimate
 
-    def correct(self, z: float) -> PositionEstimate:
-        """Correct with a position measurement; raises ValueError (non-finite z, or a result
-        that would not be finite) and then changes nothing."""
+    def correct(self, z: float | Sequence[float]) -> PositionEstimate:
+        """Correct with a measurement ``z`` (a number, or p values); raises ValueError (wrong
+        size, non-finite z, or a result that would not be finite) and then changes nothing."""
         model = self._model
         if isinstance(model, ScalarKalmanModel):
             x, var = float(self.x[0]), float(self.P[0, 0])
+            z = _one("z", z)
             x_corrected, var_corrected, _ = kalman.correct_scalar(x, var, z, model.var_z)
             nis = kalman.normalized_innovation_squared_scalar(x, var, z, model.var_z)
             self._commit(np.array([x_corrected]), np.array([[var_corrected]]), nis)
         else:
             with _overflow_checked_by_commit():
-                nis = kalman.normalized_innovation_squared(self.x, self.P, [z], model)
-                x_new, P_new, _ = kalman.correct(self.x, self.P, [z], model)
-                self._commit(x_new, P_new, nis)
+                x_new, P_new, _, nis = kalman.correct_with_nis(self.x, self.P, z, model)
+            self._commit(x_new, P_new, nis)
         return self.estimate
 
     def _commit(self, x: FloatArray, P: FloatArray, nis: float | None = None) -> None:
         """Take a step's result only if every number of it is finite."""
-        if not (np.isfinite(x).all() and np.isfinite(P).all()
+        # Python's isfinite over a few values beats two numpy ufunc calls.
+        if not (all(map(math.isfinite, x.tolist())) and all(map(math.isfinite, P.ravel().tolist()))
                 and (nis is None or math.isfinite(nis))):
             raise NonFiniteResultError(
                 "the result would not be finite (the input is too extreme for the current "
@@ -153,3 +170,12 @@ class KalmanFilter:
         self.x, self.P = x, P
         if nis is not None:
             self.last_nis = nis
+
+
+def _one(name: str, value: float | Sequence[float]) -> float:
+    """A number given alone or as a one-element sequence."""
+    if isinstance(value, Sequence) or isinstance(value, np.ndarray):
+        if len(value) != 1:
+            raise kalman.InputSizeError(f"{name}: expected 1 value, got {len(value)}")
+        return float(value[0])
+    return float(value)

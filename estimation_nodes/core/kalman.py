@@ -82,33 +82,34 @@ def _symmetric(matrix: FloatArray) -> FloatArray:
     return matrix
 
 
+class InputSizeError(ValueError):
+    """An input or measurement with another number of values than the model takes."""
+
+
 def _as_vector(name: str, value: object, size: int) -> FloatArray:
     vector = np.asarray(value, dtype=np.float64).reshape(-1)
     if vector.size != size:
-        raise ValueError(f"{name}: expected {size} values, got {vector.size}")
+        raise InputSizeError(f"{name}: expected {size} values, got {vector.size}")
     # Python's isfinite over the few values of a small vector beats a numpy ufunc call.
     if not all(map(math.isfinite, vector.tolist())):
         raise ValueError(f"{name}: expected finite numbers, got {vector.tolist()}")
     return vector
 
 
-def _gain(PCt: FloatArray, S: FloatArray) -> FloatArray:
-    """K = P C' S^-1 for the symmetric positive definite S = C P C' + R.
-
-    One and two measurements, the common cases, use S^-1 in closed form: a
-    LAPACK call costs several microseconds of overhead on a 2 x 2. A nearly
-    singular S, where the closed form loses accuracy, and larger S go to a
-    LAPACK solve: S and P are symmetric, so K' = S^-1 (C P).
-    """
+def _small_inverse(S: FloatArray) -> FloatArray | None:
+    """S^-1 in closed form for the symmetric positive definite S = C P C' + R of one or two
+    measurements, the common cases (a LAPACK call costs several microseconds of overhead
+    on a 2 x 2); None for a larger S, or a nearly singular one, where the closed form
+    loses accuracy: those go to a LAPACK solve."""
     size = S.shape[0]
     if size == 1:
-        return cast(FloatArray, PCt / S[0, 0])
+        return 1.0 / S
     if size == 2:
         (a, b), (c, d) = S.tolist()
         determinant = a * d - b * c
         if determinant > 1e-8 * (a * d) and math.isfinite(determinant):
-            return PCt.dot(np.array([[d, -b], [-c, a]]) / determinant)
-    return cast(FloatArray, np.linalg.solve(S, PCt.T).T)
+            return np.array([[d, -b], [-c, a]]) / determinant
+    return None
 
 
 def predict(
@@ -143,17 +144,33 @@ def correct(
     x, P, K
         Corrected mean, corrected covariance and the gain used.
     """
+    x_new, P_new, K, _ = correct_with_nis(x, P, z, model)
+    return x_new, P_new, K
+
+
+def correct_with_nis(
+    x: FloatArray, P: FloatArray, z: object, model: LinearGaussianModel
+) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """``correct`` and the normalized innovation squared of ``z``, from one S = C P C' + R:
+    ``(x, P, K, nis)``, with nis = y' S^-1 y, y = z - C x."""
     z_vec = _as_vector("z", z, model.measurement_size)
     C, R = model.C, model.R
     PCt = P.dot(model.C_transposed)
     innovation_cov = C.dot(PCt)
     innovation_cov += R
-    K = _gain(PCt, innovation_cov)
-    x_new = x + K.dot(z_vec - C.dot(x))
+    innovation = z_vec - C.dot(x)
+    S_inv = _small_inverse(innovation_cov)
+    if S_inv is not None:
+        K = PCt.dot(S_inv)
+        nis = float(innovation.dot(S_inv.dot(innovation)))
+    else:   # S and P are symmetric, so K' = S^-1 (C P)
+        K = cast(FloatArray, np.linalg.solve(innovation_cov, PCt.T).T)
+        nis = float(innovation.dot(np.linalg.solve(innovation_cov, innovation)))
+    x_new = x + K.dot(innovation)
     I_KC = model.identity - K.dot(C)
     P_new = I_KC.dot(P).dot(I_KC.T)
     P_new += K.dot(R).dot(K.T)
-    return x_new, _symmetric(P_new), K
+    return x_new, _symmetric(P_new), K, nis
 
 
 def normalized_innovation_squared_scalar(x: float, var: float, z: float, var_z: float) -> float:

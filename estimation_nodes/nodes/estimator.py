@@ -20,6 +20,7 @@ import time
 from collections import Counter
 from typing import Any
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovariance, PoseWithCovarianceStamped
 from rclpy.event_handler import (
@@ -35,14 +36,17 @@ from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
 
-from estimation_nodes.core import histogram
+from estimation_nodes.core import histogram, kalman
 from estimation_nodes.core.filter_state import (
     HistogramFilter,
     KalmanFilter,
     NonFiniteResultError,
-    PositionEstimate,
 )
-from estimation_nodes.nodes.messages import to_multiarray, to_pose_with_covariance
+from estimation_nodes.nodes.messages import (
+    to_multiarray,
+    to_pose_with_covariance,
+    to_state_message,
+)
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
     overlay,
@@ -100,6 +104,9 @@ class Estimator(Node):
             topics.KALMAN_ESTIMATE, topics.KALMAN_ESTIMATE_STAMPED, latched)
         self._kalman_predicted_pubs = self._pose_outputs(
             topics.KALMAN_ESTIMATE_PREDICTED, topics.KALMAN_ESTIMATE_PREDICTED_STAMPED, latched)
+        self._state_pub = self._output(Float64MultiArray, topics.KALMAN_STATE, latched)
+        self._state_predicted_pub = self._output(
+            Float64MultiArray, topics.KALMAN_STATE_PREDICTED, latched)
         self._diagnostics_pub = self._output(DiagnosticArray, "/diagnostics", 10)
         # motion_cmd first: when a command and the reading it caused are ready
         # together, the executor takes them in subscription order.
@@ -109,6 +116,8 @@ class Estimator(Node):
             (Int32, topics.MOTION_CMD, self._on_motion_cmd),
             (String, topics.TILE_OBSERVATION, self._on_tile_observation),
             (Float64, topics.POSITION_MEASUREMENT, self._on_position_measurement),
+            (Float64MultiArray, topics.KALMAN_INPUT, self._on_kalman_input),
+            (Float64MultiArray, topics.KALMAN_MEASUREMENT, self._on_kalman_measurement),
         ):
             subscription = self.create_subscription(
                 msg_type, topic, callback, INPUT_QOS,
@@ -170,13 +179,12 @@ class Estimator(Node):
         self._histogram.predict(msg.data)
         self.handled["motion_cmd"] += 1
         self._belief_predicted_pub.publish(to_multiarray(self._histogram.belief, "cells"))
-        try:
-            estimate = self._kalman.predict(float(msg.data))
-        except NonFiniteResultError as error:
-            self._reject("numerical_overflow", f"Kalman prediction of motion_cmd {msg.data} "
-                         f"dropped: {error}")
-            return
-        self._publish_pose(self._kalman_predicted_pubs, estimate)
+        # A filter with m = 1 input takes the command as u; a larger one takes kalman_input.
+        if self._kalman.input_size == 1:
+            self._kalman_step(True, float(msg.data), topics.MOTION_CMD)
+
+    def _on_kalman_input(self, msg: Float64MultiArray) -> None:
+        self._kalman_step(True, self._vector(msg), topics.KALMAN_INPUT)
 
     def _on_tile_observation(self, msg: String) -> None:
         try:
@@ -191,17 +199,49 @@ class Estimator(Node):
         self._belief_pub.publish(to_multiarray(self._histogram.belief, "cells"))
 
     def _on_position_measurement(self, msg: Float64) -> None:
+        self._kalman_step(False, msg.data, topics.POSITION_MEASUREMENT)
+
+    def _on_kalman_measurement(self, msg: Float64MultiArray) -> None:
+        self._kalman_step(False, self._vector(msg), topics.KALMAN_MEASUREMENT)
+
+    @staticmethod
+    def _vector(msg: Float64MultiArray) -> np.ndarray:
+        return np.frombuffer(msg.data, dtype=np.float64)
+
+    def _kalman_step(self, predicted: bool, value: Any, topic: str) -> None:
+        """One Kalman prediction (or correction) from ``topic``; the result published, or
+        the input dropped and counted with the filter untouched."""
         try:
-            estimate = self._kalman.correct(msg.data)
+            (self._kalman.predict if predicted else self._kalman.correct)(value)
         except NonFiniteResultError as error:
-            self._reject("numerical_overflow", f"position_measurement {msg.data!r} dropped: "
-                         f"{error}")
+            self._reject("numerical_overflow", f"{topic} {value!r} dropped: {error}")
             return
-        except ValueError as error:
-            self._reject("non_finite_measurement", f"position_measurement dropped: {error}")
+        except kalman.InputSizeError as error:
+            self._reject(f"wrong_size.{topic}", f"{topic} dropped: {error}")
             return
-        self.handled["position_measurement"] += 1
-        self._publish_pose(self._kalman_pubs, estimate)
+        except ValueError as error:   # NaN or inf
+            reason = "non_finite_measurement" if topic == topics.POSITION_MEASUREMENT \
+                else f"non_finite.{topic}"
+            self._reject(reason, f"{topic} dropped: {error}")
+            return
+        if topic != topics.MOTION_CMD:
+            self.handled[topic] += 1
+        self._publish_kalman(predicted)
+
+    def _publish_kalman(self, predicted: bool) -> None:
+        """The estimate as a pose (with its stamped twin) and the full state, x with P."""
+        state_pub, pose_pubs = ((self._state_predicted_pub, self._kalman_predicted_pubs)
+                                if predicted else (self._state_pub, self._kalman_pubs))
+        x, P = self._kalman.x, self._kalman.P
+        plain, stamped_pub = pose_pubs
+        pose = to_pose_with_covariance(x, P, self._settings.kalman.pose_components)
+        plain.publish(pose)
+        stamped = PoseWithCovarianceStamped()
+        stamped.header.stamp = self.get_clock().now().to_msg()
+        stamped.header.frame_id = self._values["frame_id"]
+        stamped.pose = pose
+        stamped_pub.publish(stamped)
+        state_pub.publish(to_state_message(x, P))
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Back to the initial state, published on every output so that a late subscriber
@@ -212,23 +252,12 @@ class Estimator(Node):
         belief = to_multiarray(self._histogram.belief, "cells")
         self._belief_predicted_pub.publish(belief)
         self._belief_pub.publish(belief)
-        for publishers in (self._kalman_predicted_pubs, self._kalman_pubs):
-            self._publish_pose(publishers, self._kalman.estimate)
+        for predicted in (True, False):
+            self._publish_kalman(predicted)
         response.success = True
         response.message = "histogram belief and Kalman estimate back to their initial state"
         self.get_logger().info(response.message)
         return response
-
-    def _publish_pose(self, publishers: tuple[Any, Any], estimate: PositionEstimate) -> None:
-        """The Kalman estimate as a PoseWithCovariance and its stamped twin."""
-        plain, stamped_pub = publishers
-        pose = to_pose_with_covariance(estimate.x, estimate.var)
-        plain.publish(pose)
-        stamped = PoseWithCovarianceStamped()
-        stamped.header.stamp = self.get_clock().now().to_msg()
-        stamped.header.frame_id = self._values["frame_id"]
-        stamped.pose = pose
-        stamped_pub.publish(stamped)
 
     # Every QoS event handler is a Python waitable that rclpy's executor visits on
     # each iteration, whether or not it fires: rclpy gives each publisher and

@@ -1,25 +1,26 @@
-"""Conversions between numpy arrays and the messages the nodes publish."""
+"""Conversions between numpy arrays and the messages the nodes publish and take."""
 
 from __future__ import annotations
 
 import array
+from collections.abc import Sequence
 
 import numpy as np
 from geometry_msgs.msg import PoseWithCovariance
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
+from estimation_nodes.core.geometry import quaternion_from_rpy
 
-def to_multiarray(values: np.ndarray, label: str) -> Float64MultiArray:
-    """A 1-D array as a Float64MultiArray with one labelled dimension.
+#: Pose axes in the order of PoseWithCovariance's 6 x 6 covariance.
+POSE_AXES = ("x", "y", "z", "roll", "pitch", "yaw")
 
-    The data goes through the array's buffer into an ``array.array('d')``:
-    no Python list of floats is ever built, which matters for large worlds.
-    """
+
+def _multiarray(values: np.ndarray, dims: list[MultiArrayDimension]) -> Float64MultiArray:
+    """The data goes through the array's buffer into an ``array.array('d')``: no Python
+    list of floats is ever built, which matters for large worlds."""
     contiguous = np.ascontiguousarray(values, dtype=np.float64)
     msg = Float64MultiArray()
-    msg.layout.dim = [
-        MultiArrayDimension(label=label, size=contiguous.size, stride=contiguous.size)
-    ]
+    msg.layout.dim = dims
     data = array.array("d")
     # A large array is read through a byte view (one copy, 0.6 ms at 1e6 cells);
     # tobytes() would copy twice (1.3 ms) but is quicker for a few cells.
@@ -29,12 +30,45 @@ def to_multiarray(values: np.ndarray, label: str) -> Float64MultiArray:
     return msg
 
 
-def to_pose_with_covariance(x: float, var: float) -> PoseWithCovariance:
-    """Position x (cells) along the loop with its variance at covariance[0] (row-major 6x6)."""
+def to_multiarray(values: np.ndarray, label: str) -> Float64MultiArray:
+    """A 1-D array as a Float64MultiArray with one labelled dimension."""
+    size = int(np.size(values))
+    return _multiarray(values, [MultiArrayDimension(label=label, size=size, stride=size)])
+
+
+def to_state_message(x: np.ndarray, P: np.ndarray) -> Float64MultiArray:
+    """A Kalman state x (n) and its covariance P (n x n) in one message, so they never come
+    apart: an (n + 1) x n array whose row 0 is x and rows 1..n are P, as its labels say."""
+    n = x.size
+    return _multiarray(np.concatenate([x, P.ravel()]), [
+        MultiArrayDimension(label=f"row 0: x, rows 1-{n}: P", size=n + 1, stride=(n + 1) * n),
+        MultiArrayDimension(label="state component", size=n, stride=n),
+    ])
+
+
+def from_state_message(msg: Float64MultiArray) -> tuple[np.ndarray, np.ndarray]:
+    """x and P back from ``to_state_message``."""
+    n = msg.layout.dim[1].size
+    values = np.frombuffer(msg.data, dtype=np.float64)
+    return values[:n].copy(), values[n:].reshape(n, n).copy()
+
+
+def to_pose_with_covariance(
+    x: np.ndarray, P: np.ndarray, components: Sequence[int] = (0,)
+) -> PoseWithCovariance:
+    """The state components named by ``components`` (indices for x, y, z, roll, pitch, yaw;
+    -1 for none) as a pose, with the matching block of P in the 6 x 6 covariance
+    (row-major over x, y, z, roll, pitch, yaw); axes without a component are 0."""
+    chosen = list(components) + [-1] * (len(POSE_AXES) - len(components))
+    values = [float(x[c]) if c >= 0 else 0.0 for c in chosen]
     msg = PoseWithCovariance()
-    msg.pose.position.x = float(x)
-    msg.pose.orientation.w = 1.0
-    covariance = np.zeros(36)
-    covariance[0] = var
-    msg.covariance = covariance
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = values[:3]
+    (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
+     msg.pose.orientation.w) = quaternion_from_rpy(*values[3:])
+    covariance = np.zeros((6, 6))
+    present = [(axis, c) for axis, c in enumerate(chosen) if c >= 0]
+    for row, ci in present:
+        for column, cj in present:
+            covariance[row, column] = P[ci, cj]
+    msg.covariance = covariance.ravel()
     return msg

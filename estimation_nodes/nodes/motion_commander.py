@@ -1,4 +1,4 @@
-"""Publishes a sequence of motion commands at a fixed rate.
+"""Publishes a sequence of motion commands (or Kalman input vectors) at a fixed rate.
 
 No command is lost at start-up: the first one goes out only once
 ``required_subscribers`` subscriptions are matched on ``motion_cmd`` (the
@@ -15,12 +15,14 @@ from __future__ import annotations
 import time
 from typing import Any
 
+import numpy as np
 from rclpy.node import Node
-from std_msgs.msg import Int32
+from std_msgs.msg import Float64MultiArray, Int32
 
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
 )
+from estimation_nodes.nodes.messages import to_multiarray
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS
 from estimation_nodes.params import topics
@@ -40,12 +42,20 @@ class MotionCommander(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.node_name, **kwargs)
         values, settings = declare_and_build(self, COMMANDER_SPECS, build_commander_settings)
-        self._commands = settings.commands
+        # Each command as the message it goes out as: Int32 on motion_cmd, or a vector
+        # on kalman_input when input_vectors is set.
+        if settings.vectors:
+            self._messages: list[Any] = [to_multiarray(np.array(v), "input")
+                                         for v in settings.vectors]
+            self._publisher = self.create_publisher(
+                Float64MultiArray, topics.KALMAN_INPUT, INPUT_QOS)
+        else:
+            self._messages = [Int32(data=command) for command in settings.commands]
+            self._publisher = self.create_publisher(Int32, topics.MOTION_CMD, INPUT_QOS)
         self._limit = settings.limit
         self._values = values
         self._sent = 0
         self._ready_since: float | None = None
-        self._publisher = self.create_publisher(Int32, topics.MOTION_CMD, INPUT_QOS)
         self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
         required = values["required_subscribers"]
         self.get_logger().info(
@@ -83,14 +93,14 @@ class MotionCommander(Node):
             self._finish()
             return
         if self._publisher.get_subscription_count() < self._values["required_subscribers"]:
-            self.get_logger().warning("a subscriber left motion_cmd: paused until it is back")
+            self.get_logger().warning(f"a subscriber left {self._publisher.topic_name}: paused "
+                                      "until it is back")
             self._timer.cancel()
             self.destroy_timer(self._timer)
             self._ready_since = None
             self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
             return
-        command = self._commands[self._sent % len(self._commands)]
-        self._publisher.publish(Int32(data=command))
+        self._publisher.publish(self._messages[self._sent % len(self._messages)])
         self._sent += 1
 
     def _finish(self) -> None:

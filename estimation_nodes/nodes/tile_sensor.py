@@ -10,11 +10,9 @@ which is how the textbook's examples are replayed.
 
 from __future__ import annotations
 
-from collections import deque
 from typing import Any
 
 import numpy as np
-from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 from std_msgs.msg import Float64, Int32, Int64, String
 
@@ -22,46 +20,12 @@ from estimation_nodes.core import simulation
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
 )
+from estimation_nodes.nodes.held_publisher import HeldPublisher
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
 from estimation_nodes.params.builders import build_sensor_settings
 from estimation_nodes.params.specs import SENSOR_SPECS
-
-#: Readings kept per topic while nobody listens; the oldest go first beyond that.
-HOLD_LIMIT = 1000
-
-
-class HeldPublisher:
-    """A publisher that keeps its messages while no subscription is matched.
-
-    What it held goes out, in order, on DDS's matched event: nothing polls
-    while the sensor is idle.
-    """
-
-    def __init__(self, node: Node, msg_type: type, topic: str, hold: bool) -> None:
-        self._publisher = node.create_publisher(
-            msg_type, topic, INPUT_QOS,
-            event_callbacks=PublisherEventCallbacks(matched=lambda _info: self.flush()))
-        self._hold = hold
-        self._held: deque = deque(maxlen=HOLD_LIMIT)
-
-    @property
-    def held(self) -> int:
-        return len(self._held)
-
-    def publish(self, msg) -> None:
-        if self._hold and (self._held or self._publisher.get_subscription_count() == 0):
-            self._held.append(msg)
-            return
-        self._publisher.publish(msg)
-
-    def flush(self) -> None:
-        """Send what was held, in order, once a subscription is matched."""
-        if self._held and self._publisher.get_subscription_count() > 0:
-            while self._held:
-                self._publisher.publish(self._held.popleft())
-
 
 class TileSensor(Node):
     """Ground truth and simulated sensing for one robot on the cyclic world."""

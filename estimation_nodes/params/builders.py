@@ -111,6 +111,8 @@ class KalmanSettings:
 
     initial: GaussianState
     model: ScalarKalmanModel | LinearGaussianModel
+    #: State index shown as pose x, y, z, roll, pitch, yaw (-1: none), up to six.
+    pose_components: tuple[int, ...] = (0,)
 
     @property
     def mode(self) -> str:
@@ -130,9 +132,22 @@ def build_kalman_settings(values: Mapping[str, Any]) -> KalmanSettings:
                         for name in ("kalman.P0", "kalman.var_u", "kalman.var_z"))
     scalar = ScalarKalmanModel(var_u, var_z)
     matrix_initial, matrix = _build_matrix_model(values, "kalman.matrix.")
-    if mode == "scalar":
-        return KalmanSettings(GaussianState(np.array([x0]), np.array([[P0]])), scalar)
-    return KalmanSettings(matrix_initial, matrix)
+    initial = GaussianState(np.array([x0]), np.array([[P0]])) if mode == "scalar" \
+        else matrix_initial
+    components = _pose_components("kalman.pose_components", values["kalman.pose_components"])
+    n = initial.x.size
+    if max(components) >= n:
+        raise ValueError(f"kalman.pose_components: expected state indices below n = {n} "
+                         f"(or -1), got {list(components)}")
+    return KalmanSettings(initial, scalar if mode == "scalar" else matrix, components)
+
+
+def _pose_components(name: str, value: Any) -> tuple[int, ...]:
+    components = tuple(int(c) for c in as_list(name, value))
+    if len(components) > 6 or min(components) < -1:
+        raise ValueError(f"{name}: expected up to 6 state indices (-1 for none), "
+                         f"got {list(components)}")
+    return components
 
 
 def _kalman_mode(name: str, value: Any) -> str:
@@ -144,25 +159,57 @@ def _kalman_mode(name: str, value: Any) -> str:
 def _build_matrix_model(
     values: Mapping[str, Any], prefix: str
 ) -> tuple[GaussianState, LinearGaussianModel]:
-    """The matrix filter's initial state and model; errors name the full parameter."""
+    """The matrix filter's initial state and model (the book's Eq. 6.34), any sizes.
+
+    n comes from x0, the input size m from B (n x m), the noise size q from F
+    (n x q) and the measurement size p from C (p x n); every other matrix is
+    checked against them. Errors name the full parameter, the shape it got and
+    the shape it needs.
+    """
+    def given(name: str) -> FloatArray:
+        return _entries(prefix + name, values[prefix + name])
+
+    x0 = given("x0")
+    n = x0.size
+    B = _with_rows(prefix + "B", given("B"), n, "n x m: a row per state component, n = len(x0)")
+    F = _with_rows(prefix + "F", given("F"), n, "n x q: a row per state component")
+    C = _with_columns(prefix + "C", given("C"), n, "p x n: a column per state component")
+    p, q = C.shape[0], F.shape[1]
     try:
-        x0 = _entries("x0", values[prefix + "x0"])
-        n = x0.size
-        initial = GaussianState(x0, _matrix("P0", values[prefix + "P0"], n))
+        initial = GaussianState(x0, _shaped(prefix + "P0", given("P0"), n, n, "n x n"))
         model = LinearGaussianModel(
-            A=_matrix("A", values[prefix + "A"], n),
-            B=_matrix("B", values[prefix + "B"], n),
-            C=_matrix("C", values[prefix + "C"], 1),
-            F=_matrix("F", values[prefix + "F"], n),
-            Q=_square("Q", values[prefix + "Q"]),
-            R=_square("R", values[prefix + "R"]),
+            A=_shaped(prefix + "A", given("A"), n, n, "n x n"),
+            B=B, C=C, F=F,
+            Q=_shaped(prefix + "Q", given("Q"), q, q, "q x q, q = columns of F"),
+            R=_shaped(prefix + "R", given("R"), p, p, "p x p, p = rows of C"),
         )
     except ValueError as error:
         message = str(error)
         raise ValueError(message if message.startswith(prefix) else prefix + message) from None
-    if model.input_size != 1:
-        raise ValueError(f"{prefix}B: expected n x 1 (u is one command), got {model.B.shape}")
     return initial, model
+
+
+def _shaped(name: str, values: FloatArray, rows: int, columns: int, needs: str) -> FloatArray:
+    if values.size != rows * columns:
+        raise ValueError(f"{name}: expected {rows} x {columns} ({needs}), "
+                         f"got {values.size} values")
+    return values.reshape(rows, columns)
+
+
+def _with_rows(name: str, values: FloatArray, rows: int, needs: str) -> FloatArray:
+    """``rows`` rows, as many columns as the values give (at least one)."""
+    if values.size == 0 or values.size % rows:
+        raise ValueError(f"{name}: expected {rows} x k values ({needs}), "
+                         f"got {values.size} values")
+    return values.reshape(rows, -1)
+
+
+def _with_columns(name: str, values: FloatArray, columns: int, needs: str) -> FloatArray:
+    """``columns`` columns, as many rows as the values give (at least one)."""
+    if values.size == 0 or values.size % columns:
+        raise ValueError(f"{name}: expected k x {columns} values ({needs}), "
+                         f"got {values.size} values")
+    return values.reshape(-1, columns)
 
 
 def _square(name: str, flat: Any) -> FloatArray:
@@ -259,6 +306,7 @@ _ALONE: dict[str, Callable[[str, Any], object]] = {
     "kalman.matrix.F": _entries,
     "kalman.matrix.Q": _covariance,
     "kalman.matrix.R": _covariance,
+    "kalman.pose_components": _pose_components,
     "frame_id": _non_empty_text,
 }
 
@@ -308,6 +356,12 @@ class CommanderSettings:
     commands: tuple[int, ...]
     #: Commands to send in all; None repeats without end.
     limit: int | None
+    #: When given, the sequence is these input vectors (kalman_input) instead of commands.
+    vectors: tuple[tuple[float, ...], ...] = ()
+
+    @property
+    def length(self) -> int:
+        return len(self.vectors or self.commands)
 
 
 #: motion_cmd is std_msgs/Int32.
@@ -315,17 +369,49 @@ INT32_RANGE = (-(2**31), 2**31 - 1)
 
 
 def build_commander_settings(values: Mapping[str, Any]) -> CommanderSettings:
+    vectors = _input_vectors(values)
     given = values["commands"]
-    if given is UNSET or not hasattr(given, "__len__") or isinstance(given, (str, bytes)) \
-            or len(given) == 0:
+    if not vectors and (given is UNSET or not hasattr(given, "__len__")
+                        or isinstance(given, (str, bytes)) or len(given) == 0):
         raise ValueError("commands: expected a list of at least one integer, got none")
-    commands = tuple(int(c) for c in given)
+    commands = tuple(int(c) for c in given or ())
     low, high = INT32_RANGE
     outside = [c for c in commands if not low <= c <= high]
     if outside:
         raise ValueError(f"commands: {outside[0]} does not fit motion_cmd (std_msgs/Int32: "
                          f"{low}..{high})")
+    length = len(vectors or commands)
     limit = values["max_commands"] or None
     if not values["repeat"]:
-        limit = min(limit or len(commands), len(commands))
-    return CommanderSettings(commands, limit)
+        limit = min(limit or length, length)
+    return CommanderSettings(commands, limit, vectors)
+
+
+def _input_vectors(values: Mapping[str, Any]) -> tuple[tuple[float, ...], ...]:
+    given = values.get("input_vectors")
+    if given is UNSET or len(given) == 0:
+        return ()
+    flat = _entries("input_vectors", given)
+    size = int(values["input_size"])
+    rows = _with_columns("input_vectors", flat, size, f"input_size = {size} values a command")
+    return tuple(tuple(float(v) for v in row) for row in rows)
+
+
+@dataclass(frozen=True)
+class LinearSystemSettings:
+    """The simulated system of Eq. 6.34 and its true initial state."""
+
+    model: LinearGaussianModel
+    initial_state: FloatArray
+
+
+def build_linear_system_settings(values: Mapping[str, Any]) -> LinearSystemSettings:
+    initial, model = _build_matrix_model(values, "kalman.matrix.")
+    given = values.get("true_initial_state")
+    if given is UNSET or len(given) == 0:
+        return LinearSystemSettings(model, initial.x)
+    state = _entries("true_initial_state", given)
+    if state.size != model.state_size:
+        raise ValueError(f"true_initial_state: expected {model.state_size} values (n), "
+                         f"got {state.size}")
+    return LinearSystemSettings(model, state)

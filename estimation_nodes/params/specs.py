@@ -59,7 +59,29 @@ MIN_VARIANCE = 1e-12
 MAX_VARIANCE = 1e12
 _ENTRIES = f" Entries within +-{MAX_STATE:g}."
 
-ESTIMATOR_SPECS = WORLD_SPECS + (
+#: The linear system of the book's Eq. 6.34, for the estimator's matrix mode and for the
+#: simulated system (linear_system) alike: one scenario section can serve both.
+MATRIX_SPECS = (
+    ParamSpec("kalman.matrix.x0", [0.0], "Matrix mode: initial state x0; its length n sets "
+              f"the state size.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.P0", [100.0],
+              f"Matrix mode: initial covariance, n x n row-major.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.A", [1.0],
+              f"Matrix mode: transition matrix A, n x n row-major.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.B", [1.0], "Matrix mode: input matrix B, n x m row-major; m "
+              "inputs per kalman_input (m = 1: motion_cmd drives it too)." + _ENTRIES),
+    ParamSpec("kalman.matrix.C", [1.0], "Matrix mode: measurement matrix C, p x n row-major; "
+              "p values per kalman_measurement (p = 1: position_measurement corrects too)."
+              + _ENTRIES),
+    ParamSpec("kalman.matrix.F", [1.0],
+              f"Matrix mode: noise-input matrix F, n x q row-major.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.Q", [2.0],
+              f"Matrix mode: process noise covariance, q x q.{_ENTRIES}"),
+    ParamSpec("kalman.matrix.R", [4.0],
+              f"Matrix mode: measurement noise covariance, p x p.{_ENTRIES}"),
+)
+
+ESTIMATOR_SPECS = WORLD_SPECS + MATRIX_SPECS + (
     ParamSpec("initial_belief", UNSET,
               "Prior over the cells (normalized); leave unset for a uniform prior.",
               type_name="double_array"),
@@ -74,21 +96,10 @@ ESTIMATOR_SPECS = WORLD_SPECS + (
               min_value=MIN_VARIANCE, max_value=MAX_VARIANCE),
     ParamSpec("kalman.var_z", 4.0, "Variance of a position measurement.",
               min_value=MIN_VARIANCE, max_value=MAX_VARIANCE),
-    ParamSpec("kalman.matrix.x0", [0.0], "Matrix mode: initial state; its length n sets the "
-              f"state size. Component 0 is published as the position.{_ENTRIES}"),
-    ParamSpec("kalman.matrix.P0", [100.0],
-              f"Matrix mode: initial covariance, n x n row-major.{_ENTRIES}"),
-    ParamSpec("kalman.matrix.A", [1.0],
-              f"Matrix mode: transition matrix A, n x n row-major.{_ENTRIES}"),
-    ParamSpec("kalman.matrix.B", [1.0], "Matrix mode: input matrix B, n x 1 (u is the "
-              f"motion command).{_ENTRIES}"),
-    ParamSpec("kalman.matrix.C", [1.0], f"Matrix mode: measurement matrix C, 1 x n.{_ENTRIES}"),
-    ParamSpec("kalman.matrix.F", [1.0],
-              f"Matrix mode: noise-input matrix F, n x q row-major.{_ENTRIES}"),
-    ParamSpec("kalman.matrix.Q", [2.0],
-              f"Matrix mode: process noise covariance, q x q.{_ENTRIES}"),
-    ParamSpec("kalman.matrix.R", [4.0],
-              f"Matrix mode: measurement noise variance, 1 x 1.{_ENTRIES}"),
+    ParamSpec("kalman.pose_components", [0],
+              "The state components shown as pose x, y, z, roll, pitch, yaw of "
+              "kalman_estimate (up to 6 indices into the state; -1 for none); the matching "
+              "block of P fills the pose covariance."),
     ParamSpec("frame_id", "map", "frame_id of kalman_estimate_stamped (not empty)."),
     ParamSpec("history_depth", 1,
               "How many of the latest estimates each output topic keeps for late subscribers "
@@ -135,6 +146,12 @@ SENSOR_SPECS = WORLD_SPECS + (
 COMMANDER_SPECS = (
     ParamSpec("commands", [1], "Motion commands to publish, in cells (positive: index + u).",
               read_only=True),
+    ParamSpec("input_vectors", UNSET,
+              "When set: publish these as kalman_input (std_msgs/Float64MultiArray), "
+              "input_size values per command, row-major, instead of 'commands' on motion_cmd.",
+              read_only=True, type_name="double_array"),
+    ParamSpec("input_size", 1, "Values per command of input_vectors (m).", read_only=True,
+              min_value=1, max_value=1000),
     ParamSpec("rate_hz", 2.0, "Commands per second.", read_only=True,
               min_value=0.001, max_value=100000.0),
     ParamSpec("repeat", False, "Start the sequence again after its last command.",
@@ -150,9 +167,21 @@ COMMANDER_SPECS = (
               "staying up.", read_only=True),
 )
 
+LINEAR_SYSTEM_SPECS = MATRIX_SPECS + (
+    ParamSpec("true_initial_state", UNSET,
+              "The simulated system's true initial state; unset: kalman.matrix.x0.",
+              read_only=True, type_name="double_array"),
+    ParamSpec("seed", -1, "Seed of the process and measurement noise; -1 draws one from the "
+              "operating system.", read_only=True),
+    ParamSpec("hold_until_matched", True,
+              "Keep measurements (up to 1000) while no subscriber is matched on "
+              "kalman_measurement and send them, in order, once one is.", read_only=True),
+)
+
 #: Each node's parameters, by node name.
 NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "estimator": ESTIMATOR_SPECS,
     "tile_sensor": SENSOR_SPECS,
     "motion_commander": COMMANDER_SPECS,
+    "linear_system": LINEAR_SYSTEM_SPECS,
 }

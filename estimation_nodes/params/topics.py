@@ -16,9 +16,14 @@ KALMAN_ESTIMATE = "kalman_estimate"
 KALMAN_ESTIMATE_STAMPED = "kalman_estimate_stamped"
 KALMAN_ESTIMATE_PREDICTED = "kalman_estimate_predicted"
 KALMAN_ESTIMATE_PREDICTED_STAMPED = "kalman_estimate_predicted_stamped"
+KALMAN_INPUT = "kalman_input"
+KALMAN_MEASUREMENT = "kalman_measurement"
+TRUE_STATE = "true_state"
+KALMAN_STATE = "kalman_state"
+KALMAN_STATE_PREDICTED = "kalman_state_predicted"
 
 #: What drives the estimator, in the order it subscribes (commands first).
-INPUTS = (MOTION_CMD, TILE_OBSERVATION, POSITION_MEASUREMENT)
+INPUTS = (MOTION_CMD, TILE_OBSERVATION, POSITION_MEASUREMENT, KALMAN_INPUT, KALMAN_MEASUREMENT)
 
 #: Every topic of a run: relative name -> ROS type.
 TOPIC_TYPES = {
@@ -32,4 +37,18 @@ TOPIC_TYPES = {
     KALMAN_ESTIMATE_STAMPED: "geometry_msgs/msg/PoseWithCovarianceStamped",
     KALMAN_ESTIMATE_PREDICTED: "geometry_msgs/msg/PoseWithCovariance",
     KALMAN_ESTIMATE_PREDICTED_STAMPED: "geometry_msgs/msg/PoseWithCovarianceStamped",
+    KALMAN_INPUT: "std_msgs/msg/Float64MultiArray",
+    KALMAN_MEASUREMENT: "std_msgs/msg/Float64MultiArray",
+    TRUE_STATE: "std_msgs/msg/Float64MultiArray",
+    KALMAN_STATE: "std_msgs/msg/Float64MultiArray",
+    KALMAN_STATE_PREDICTED: "std_msgs/msg/Float64MultiArray",
+}
+
+#: What each node publishes: the demo waits for the monitor to hear each of them.
+ESTIMATOR_OUTPUTS = (BELIEF_PREDICTED, BELIEF, KALMAN_ESTIMATE, KALMAN_ESTIMATE_STAMPED,
+                     KALMAN_ESTIMATE_PREDICTED, KALMAN_ESTIMATE_PREDICTED_STAMPED,
+                     KALMAN_STATE, KALMAN_STATE_PREDICTED)
+SIMULATOR_OUTPUTS = {
+    "tile_sensor": (TRUE_POSITION, TILE_OBSERVATION, POSITION_MEASUREMENT),
+    "linear_system": (TRUE_STATE, KALMAN_MEASUREMENT),
 }

@@ -18,6 +18,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+import yaml
+
 from estimation_nodes.params import topics
 from estimation_nodes.params.files import check_params_file
 from estimation_nodes.tools.graph_runtime import spin_until, stop_process
@@ -28,13 +30,14 @@ from estimation_nodes.tools.run_record import RunRecord, summarize
 NODE_MODULES = {
     "estimator": "estimation_nodes.nodes.estimator",
     "tile_sensor": "estimation_nodes.nodes.tile_sensor",
+    "linear_system": "estimation_nodes.nodes.linear_system",
     "motion_commander": "estimation_nodes.nodes.motion_commander",
 }
 #: A run where localization visibly succeeds; the book's own world and examples are
 #: other scenarios, named in the summary.
 DEFAULT_SCENARIO = "localization"
 #: Start order: the commander last, so it finds the others soonest.
-START_ORDER = ("estimator", "tile_sensor", "motion_commander")
+START_ORDER = ("estimator", "simulator", "motion_commander")
 #: Subscribers the commander waits for: the sensor, the estimator and this script's monitor.
 REQUIRED_SUBSCRIBERS = 3
 
@@ -61,6 +64,14 @@ def find_scenario(name: str) -> Path:
             return candidate
     raise DemoError(f"--scenario: no scenario named {name!r}; known scenarios: "
                     f"{known_scenarios()}")
+
+
+def simulator_for(params: Path) -> str:
+    """The simulated world a parameter file is for: linear_system when the file has a
+    section for it (a matrix Kalman scenario), otherwise the tile world's tile_sensor."""
+    document = yaml.safe_load(params.read_text(encoding="utf-8")) or {}
+    names = {str(key).rstrip("/").rsplit("/", 1)[-1] for key in document}
+    return "linear_system" if "linear_system" in names else "tile_sensor"
 
 
 def known_scenarios() -> list[str]:
@@ -187,10 +198,13 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
         monitor, writer = make_monitor(params, args)
         executor.add_node(monitor)
         deadline = time.monotonic() + args.timeout
-        for name in START_ORDER:
+        simulator = simulator_for(params)
+        heard = topics.ESTIMATOR_OUTPUTS + topics.SIMULATOR_OUTPUTS[simulator]
+        for role in START_ORDER:
+            name = simulator if role == "simulator" else role
             if name == "motion_commander":
-                # The monitor must hear the sensor's and the estimator's first messages.
-                spin_until(executor, lambda: monitor.publishers_matched((topics.MOTION_CMD,)),
+                # The monitor must hear the simulator's and the estimator's first messages.
+                spin_until(executor, lambda: monitor.publishers_matched(heard),
                            deadline - time.monotonic())
             command = [sys.executable, "-m", NODE_MODULES[name],
                        "--ros-args", "--params-file", str(params)]
@@ -220,9 +234,8 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
         code = 130
     finally:
         ignore_further_interrupts()
-        for name in reversed(START_ORDER):
-            if name in processes:
-                stop_process(processes[name])
+        for process in reversed(processes.values()):
+            stop_process(process)
         if monitor is not None:
             monitor.destroy_node()
         if writer is not None:
@@ -237,6 +250,7 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     from rclpy.executors import SingleThreadedExecutor
 
     from estimation_nodes.nodes.estimator import Estimator
+    from estimation_nodes.nodes.linear_system import LinearSystem
     from estimation_nodes.nodes.motion_commander import MotionCommander
     from estimation_nodes.nodes.tile_sensor import TileSensor
     from estimation_nodes.nodes.parameters import ConfigurationError
@@ -252,7 +266,8 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     try:
         monitor, writer = make_monitor(params, args)
         nodes.append(monitor)
-        for node_class in (Estimator, TileSensor, MotionCommander):
+        simulator = LinearSystem if simulator_for(params) == "linear_system" else TileSensor
+        for node_class in (Estimator, simulator, MotionCommander):
             nodes.append(node_class())
         for node in nodes:
             executor.add_node(node)

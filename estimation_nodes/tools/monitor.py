@@ -14,6 +14,7 @@ import numpy as np
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
 
+from estimation_nodes.nodes.messages import from_state_message
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
 from estimation_nodes.tools.recording import McapRunWriter
@@ -26,6 +27,15 @@ def message_class(type_name: str) -> type:
     """The Python class of a ROS type named like 'std_msgs/msg/Int32'."""
     package, interface, name = type_name.split("/")
     return getattr(importlib.import_module(f"{package}.{interface}"), name)
+
+
+def vector_of(msg) -> np.ndarray:
+    return np.frombuffer(msg.data, dtype=np.float64).copy()
+
+
+def input_value(msg) -> object:
+    """A scalar input's value, or a vector input's values as a tuple."""
+    return tuple(msg.data) if hasattr(msg, "layout") else msg.data
 
 
 def bars(belief: np.ndarray) -> str:
@@ -59,23 +69,26 @@ class RunMonitor(Node):
             topics.KALMAN_ESTIMATE_PREDICTED: lambda msg: self.record.kalman_predicted.append(
                 (msg.pose.position.x, msg.covariance[0])),
             topics.KALMAN_ESTIMATE_PREDICTED_STAMPED: lambda msg: None,
+            topics.KALMAN_STATE: self._on_state,
+            topics.KALMAN_STATE_PREDICTED: lambda msg: self.record.states_predicted.append(
+                from_state_message(msg)),
+            topics.TRUE_STATE: lambda msg: self.record.true_states.append(vector_of(msg)),
         }
         for topic in topics.INPUTS:
-            handlers[topic] = lambda msg, t=topic: self.record.add_event(t, msg.data)
+            handlers[topic] = lambda msg, t=topic: self.record.add_event(t, input_value(msg))
         self._subscriptions_by_topic = {}
         for topic, msg_type in self._types.items():
             qos = INPUT_QOS if topic in topics.INPUTS else latched_qos(1000)
             self._subscriptions_by_topic[topic] = self.create_subscription(
                 msg_type, topic, self._raw_handler(topic, handlers[topic]), qos, raw=True)
 
-    def publishers_matched(self, except_topics: tuple[str, ...] = ()) -> bool:
-        """Whether every topic (but those named) has a matched publisher.
+    def publishers_matched(self, published: tuple[str, ...]) -> bool:
+        """Whether each of the ``published`` topics has a matched publisher.
 
         Volatile readings published before the match would be lost to the monitor.
         """
-        return all(sub.get_publisher_count() >= 1
-                   for topic, sub in self._subscriptions_by_topic.items()
-                   if topic not in except_topics)
+        return all(self._subscriptions_by_topic[topic].get_publisher_count() >= 1
+                   for topic in published)
 
     def _raw_handler(self, topic: str, handle: Callable[[object], None]):
         msg_type = self._types[topic]
@@ -109,9 +122,22 @@ class RunMonitor(Node):
         self._say(f"step {step + 1:3d}  corrected  {bars(belief)}  most likely cell "
                   f"{int(np.argmax(belief))} {self._truth_note(step, belief.size)}")
 
+    def _on_state(self, msg) -> None:
+        x, P = from_state_message(msg)
+        self.record.states.append((x, P))
+        if x.size == 1:   # the 1-D filter: kalman_estimate says it all
+            return
+        step = len(self.record.states) - 1
+        truth = self.record.true_states
+        note = f"true {np.array2string(truth[step], precision=3)}" if step < len(truth) else ""
+        self._say(f"step {step + 1:3d}  kalman     x = {np.array2string(x, precision=3)}  "
+                  f"std = {np.array2string(np.sqrt(np.diag(P)), precision=3)}  {note}")
+
     def _on_kalman(self, msg) -> None:
         x, var = msg.pose.position.x, msg.covariance[0]
         self.record.kalman.append((x, var))
+        if self.record.true_states:
+            return   # a matrix run: printed from kalman_state
         step = len(self.record.kalman) - 1
         truth = self.record.truth
         note = f"(true position {truth[step]})" if step < len(truth) else ""

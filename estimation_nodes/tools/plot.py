@@ -1,4 +1,5 @@
-"""Render a run as one PNG: histogram beliefs per step and the Kalman estimate over time.
+"""Render a run as one PNG: histogram beliefs per step and the Kalman estimate over time
+(or, for a matrix run in the plane, the track with its 2-sigma ellipses).
 
     estimation_plot RUN.mcap --output run.png
 
@@ -75,6 +76,54 @@ def _kalman_panel(ax, record: RunRecord) -> None:
     ax.grid(alpha=0.3)
 
 
+def _ellipse_points(mean: np.ndarray, covariance: np.ndarray, sigmas: float = 2.0,
+                    points: int = 60) -> np.ndarray:
+    """Points on the ``sigmas`` contour of a 2-D Gaussian."""
+    values, vectors = np.linalg.eigh(covariance)
+    angles = np.linspace(0.0, 2.0 * np.pi, points)
+    circle = np.stack([np.cos(angles), np.sin(angles)])
+    return (mean[:, None] + vectors @ (sigmas * np.sqrt(np.maximum(values, 0.0))[:, None]
+                                        * circle)).T
+
+
+def _tracking_panels(figure, record: RunRecord) -> None:
+    """A matrix run in the plane: state components 0 and 1 as x and y."""
+    track = figure.add_subplot(1, 2, 1)
+    estimates = np.array([x[:2] for x, _ in record.states])
+    if record.true_states:
+        truth = np.array([x[:2] for x in record.true_states])
+        track.plot(truth[:, 0], truth[:, 1], color="#d62728", linestyle="--", label="truth")
+    if record.kalman_measurements and len(record.kalman_measurements[0]) >= 2:
+        z = np.array([m[:2] for m in record.kalman_measurements])
+        track.plot(z[:, 0], z[:, 1], "x", color="#ff7f0e", label="measurement")
+    track.plot(estimates[:, 0], estimates[:, 1], color="#08519c", marker="o", markersize=3,
+               label="Kalman estimate")
+    for index, (x, P) in enumerate(record.states):
+        ellipse = _ellipse_points(x[:2], P[:2, :2])
+        track.plot(ellipse[:, 0], ellipse[:, 1], color="#6baed6", linewidth=0.8,
+                   label="2-sigma ellipse" if index == 0 else None)
+    track.set_aspect("equal", adjustable="datalim")
+    track.set_xlabel("x")
+    track.set_ylabel("y")
+    track.set_title("track in the plane")
+    track.legend(loc="best", fontsize=9)
+    track.grid(alpha=0.3)
+    errors = figure.add_subplot(1, 2, 2)
+    steps = np.arange(1, len(record.states) + 1)
+    if record.true_states:
+        count = min(len(record.states), len(record.true_states))
+        error = [np.linalg.norm(record.states[i][0][:2] - record.true_states[i][:2])
+                 for i in range(count)]
+        errors.plot(steps[:count], error, color="#08519c", label="|estimate - truth|")
+    sigma = [np.sqrt(np.trace(P[:2, :2])) for _, P in record.states]
+    errors.plot(steps, sigma, color="#6baed6", linestyle=":", label="sqrt(trace P), position")
+    errors.set_xlabel("step")
+    errors.set_ylabel("position error")
+    errors.set_title("position error and its predicted size")
+    errors.legend(loc="best", fontsize=9)
+    errors.grid(alpha=0.3)
+
+
 def render(record: RunRecord, output: Path) -> Path:
     """Write the picture of ``record`` to ``output`` (PNG, 1600 x 1200 pixels)."""
     import matplotlib
@@ -83,6 +132,11 @@ def render(record: RunRecord, output: Path) -> Path:
     import matplotlib.pyplot as plt
 
     figure = plt.figure(figsize=FIGURE_INCHES, dpi=DPI)
+    if record.states and record.states[0][0].size >= 2:
+        _tracking_panels(figure, record)
+        figure.suptitle("estimation_nodes: matrix Kalman filter, tracking in the plane",
+                        fontsize=13)
+        return _save(figure, output, plt)
     grid = figure.add_gridspec(4, 4, height_ratios=[1, 1, 1, 1.6], hspace=0.45, wspace=0.25)
     steps = _chosen_steps(max(len(record.predicted), len(record.corrected)))
     for panel, step in enumerate(steps):
@@ -96,6 +150,10 @@ def render(record: RunRecord, output: Path) -> Path:
     _kalman_panel(figure.add_subplot(grid[3, :]), record)
     figure.suptitle("estimation_nodes: histogram belief per step (top) and Kalman estimate "
                     "(bottom)", fontsize=13)
+    return _save(figure, output, plt)
+
+
+def _save(figure, output: Path, plt) -> Path:
     output.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(output, dpi=DPI)
     plt.close(figure)

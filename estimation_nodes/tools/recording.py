@@ -12,6 +12,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -123,12 +124,14 @@ def _base(topic: str) -> str:
     return topic.rsplit("/", 1)[-1]
 
 
-def _add_decoded(record: RunRecord, topic: str, msg: object) -> None:
+def _add_decoded(record: RunRecord, topic: str, msg: Any) -> None:
     base = _base(topic)
     if base in topics.INPUTS:
-        record.add_event(base, msg.data)
+        record.add_event(base, tuple(msg.data) if hasattr(msg, "layout") else msg.data)
     elif base == topics.TRUE_POSITION:
         record.truth.append(msg.data)
+    elif base == topics.TRUE_STATE:
+        record.true_states.append(np.asarray(msg.data, dtype=np.float64))
     elif base in (topics.BELIEF_PREDICTED, topics.BELIEF):
         values = np.asarray(msg.data, dtype=np.float64)
         (record.predicted if base == topics.BELIEF_PREDICTED else record.corrected).append(values)
@@ -136,6 +139,12 @@ def _add_decoded(record: RunRecord, topic: str, msg: object) -> None:
         estimate = (msg.pose.position.x, msg.covariance[0])
         (record.kalman if base == topics.KALMAN_ESTIMATE else record.kalman_predicted).append(
             estimate)
+    elif base in (topics.KALMAN_STATE, topics.KALMAN_STATE_PREDICTED):
+        n = msg.layout.dim[1].size
+        values = np.asarray(msg.data, dtype=np.float64)
+        state = (values[:n], values[n:].reshape(n, n))
+        (record.states if base == topics.KALMAN_STATE else record.states_predicted).append(
+            state)
 
 
 def read_recording(path: Path) -> Recording:

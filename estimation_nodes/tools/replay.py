@@ -92,38 +92,57 @@ def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comp
     kalman = KalmanFilter(settings.kalman.initial, settings.kalman.model)
     run = recording.record
     comparison = Comparison()
-    recorded = ((topics.BELIEF_PREDICTED, run.predicted), (topics.BELIEF, run.corrected),
-                (topics.KALMAN_ESTIMATE_PREDICTED, run.kalman_predicted),
-                (topics.KALMAN_ESTIMATE, run.kalman))
-    counts = {output: 0 for output, _ in recorded}
+    recorded = {
+        topics.BELIEF_PREDICTED: run.predicted,
+        topics.BELIEF: run.corrected,
+        topics.KALMAN_ESTIMATE_PREDICTED: run.kalman_predicted,
+        topics.KALMAN_ESTIMATE: run.kalman,
+        topics.KALMAN_STATE_PREDICTED: [_flat(*state) for state in run.states_predicted],
+        topics.KALMAN_STATE: [_flat(*state) for state in run.states],
+    }
+    counts = {output: 0 for output in recorded}
+    # The component kalman_estimate shows as its x (the 1-D filter's position).
+    shown = settings.kalman.pose_components[0]
 
-    def check(output: str, online: list, offline) -> None:
+    def check(output: str, offline) -> None:
         index = counts[output]
         counts[output] += 1
-        comparison.check(output, index, _at(online, index), offline, tolerance)
+        comparison.check(output, index, _at(recorded[output], index), offline, tolerance)
+
+    def kalman_step(predicted: bool, value) -> None:
+        # As the estimator: a step it rejected published nothing, so nothing to compare.
+        try:
+            (kalman.predict if predicted else kalman.correct)(value)
+        except ValueError:
+            return
+        suffix = "_predicted" if predicted else ""
+        if shown >= 0:
+            check(topics.KALMAN_ESTIMATE + suffix, (kalman.x[shown], kalman.P[shown, shown]))
+        check(topics.KALMAN_STATE + suffix, _flat(kalman.x, kalman.P))
 
     for topic, value in run.events:
-        try:
-            if topic == topics.MOTION_CMD:
-                belief.predict(value)
-                check(topics.BELIEF_PREDICTED, run.predicted, belief.belief)
-                estimate = kalman.predict(float(value))
-                output, online, offline = (topics.KALMAN_ESTIMATE_PREDICTED,
-                                           run.kalman_predicted, tuple(estimate))
-            elif topic == topics.TILE_OBSERVATION:
+        if topic == topics.MOTION_CMD:
+            belief.predict(value)
+            check(topics.BELIEF_PREDICTED, belief.belief)
+            if kalman.input_size == 1:
+                kalman_step(True, float(value))
+        elif topic == topics.TILE_OBSERVATION:
+            try:
                 belief.correct(value)
-                output, online, offline = topics.BELIEF, run.corrected, belief.belief
-            else:
-                estimate = kalman.correct(value)
-                output, online, offline = topics.KALMAN_ESTIMATE, run.kalman, tuple(estimate)
-        except ValueError:
-            continue   # the estimator rejected it too, and published nothing
-        check(output, online, offline)
-    for output, online in recorded:
+            except ValueError:
+                continue
+            check(topics.BELIEF, belief.belief)
+        else:
+            kalman_step(topic == topics.KALMAN_INPUT, value)
+    for output, online in recorded.items():
         for index in range(counts[output], len(online)):
             comparison.differences.append(
                 f"{output} #{index + 1}: recorded online, no input to compute it offline")
     return comparison
+
+
+def _flat(x: np.ndarray, P: np.ndarray) -> np.ndarray:
+    return np.concatenate([np.asarray(x, float), np.asarray(P, float).ravel()])
 
 
 def main(argv: list[str] | None = None) -> None:

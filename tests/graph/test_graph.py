@@ -19,7 +19,8 @@ from estimation_nodes.nodes.qos import INPUT_QOS
 from tests.conftest import SCENARIOS, spin_until
 from tests.graph.graph_tools import beliefs, executable, start_graph, wait_for_commander
 
-EXECUTABLES = ("motion_commander", "tile_sensor", "estimator", "estimation_demo")
+EXECUTABLES = ("motion_commander", "tile_sensor", "linear_system", "estimator", "estimation_demo",
+               "estimation_replay", "estimation_plot")
 
 
 def test_ros2_run_finds_every_executable():

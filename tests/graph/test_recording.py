@@ -21,6 +21,8 @@ EXPECTED_TOPICS = {
     "/kalman_estimate_stamped": "geometry_msgs/msg/PoseWithCovarianceStamped",
     "/kalman_estimate_predicted": "geometry_msgs/msg/PoseWithCovariance",
     "/kalman_estimate_predicted_stamped": "geometry_msgs/msg/PoseWithCovarianceStamped",
+    "/kalman_state": "std_msgs/msg/Float64MultiArray",
+    "/kalman_state_predicted": "std_msgs/msg/Float64MultiArray",
 }
 
 
@@ -51,12 +53,13 @@ def test_example_6_14_recording_has_every_topic_and_replays_exactly(ros_env, tmp
     assert header.profile == "ros2"
     assert {t: s[0] for t, s in schemas.items()} == {
         t: n for t, n in EXPECTED_TOPICS.items()
-        if t not in ("/position_measurement", "/kalman_estimate", "/kalman_estimate_stamped")}
+        if t not in ("/position_measurement", "/kalman_estimate", "/kalman_estimate_stamped",
+                     "/kalman_state")}
     assert all(s[1:] == ("ros2msg", "cdr") for s in schemas.values())
     counts = {t: len(m) for t, m in by_topic.items()}
     assert counts == {"/motion_cmd": 3, "/tile_observation": 3, "/true_position": 3,
                       "/belief_predicted": 3, "/belief": 3, "/kalman_estimate_predicted": 3,
-                      "/kalman_estimate_predicted_stamped": 3}
+                      "/kalman_estimate_predicted_stamped": 3, "/kalman_state_predicted": 3}
     assert [m.data for m in by_topic["/tile_observation"]] == ["bright", "dark", "dark"]
     np.testing.assert_allclose(by_topic["/belief"][-1].data,
                                [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)

@@ -106,3 +106,17 @@ def test_gain_with_a_nearly_singular_innovation_covariance():
     _, P_new, K = kalman.correct(np.zeros(2), P, np.array([1.0, 1.0]), model)
     np.testing.assert_allclose(K, reference_gain(P, model), rtol=1e-12)
     assert np.all(np.isfinite(P_new))
+
+
+@pytest.mark.parametrize("p", [1, 2, 3])
+def test_the_correction_s_nis_equals_the_separate_computation(p):
+    rng = np.random.default_rng(p)
+    n = 4
+    model = LinearGaussianModel(np.eye(n), np.ones((n, 1)), rng.normal(size=(p, n)), np.eye(n),
+                                np.eye(n), np.diag(rng.uniform(0.5, 2.0, p)))
+    x, P, z = rng.normal(size=n), np.eye(n) * 3.0, rng.normal(size=p)
+    x_new, P_new, K, nis = kalman.correct_with_nis(x, P, z, model)
+    np.testing.assert_allclose(nis, kalman.normalized_innovation_squared(x, P, z, model),
+                               rtol=1e-12)
+    for ours, plain in zip((x_new, P_new, K), kalman.correct(x, P, z, model)):
+        np.testing.assert_array_equal(ours, plain)

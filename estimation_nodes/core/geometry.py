@@ -1,0 +1,19 @@
+"""Orientation conventions shared by the nodes that publish poses (numpy only)."""
+
+from __future__ import annotations
+
+import math
+
+
+def quaternion_from_rpy(
+    roll: float, pitch: float, yaw: float
+) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of the rotation yaw about z, then pitch about y, then roll about x, as
+    ROS's tf2 and REP 103 define roll, pitch and yaw."""
+    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
+    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+    return (sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+            cr * cp * cy + sr * sp * sy)
