@@ -1,0 +1,209 @@
+"""The package driven by the real `ros2` command line, as a ROS user drives it.
+
+Every query is retried until a deadline: a fresh `ros2` participant discovers the nodes in
+0.3 to 3 s. Long-running `ros2 run` processes are ended like a terminal's Ctrl-C (SIGINT to
+their process group, then SIGKILL), by their pid, at teardown at the latest.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from tests.cli.conftest import stop_group, wait_for
+from tests.conftest import SCENARIOS
+
+PKG = "estimation_nodes"
+NODES = ("estimator", "tile_sensor", "motion_commander")
+EXECUTABLES = {*NODES, "estimation_demo", "estimation_plot", "estimation_replay"}
+#: Example 6.14 of the book, step 3 (../shared/reference/README.md).
+FINAL_BELIEF = [0.048443, 0.063322, 0.244983, 0.528374, 0.114879]
+FINAL_PREDICTION = [0.1, 0.130714, 0.168571, 0.363571, 0.237143]
+#: Waiting for a node to appear or a service to answer (node list, param --timeout).
+DISCOVERY = 10
+
+
+def time_limit(seconds: float):
+    """A time limit on the test body only: the first test's set-up may build the CLI (the
+    build has its own limit of 600 s)."""
+    return pytest.mark.timeout(seconds, func_only=True)
+
+
+def params_file(name: str) -> tuple[str, ...]:
+    return ("--ros-args", "--params-file", str(SCENARIOS / name))
+
+
+def start_nodes(ros2, ros2_start, *names: str, args: tuple[str, ...] = ()) -> dict:
+    """`ros2 run` each node; returns once `ros2 node list` shows all of them."""
+    started = {name: ros2_start("run", PKG, name, *args) for name in names}
+
+    def listed():
+        shown = set(ros2("node", "list", "--no-daemon").stdout.split())
+        assert all(p.poll() is None for p in started.values()), "a node ended early"
+        return {f"/{name}" for name in names} <= shown
+
+    wait_for(listed, 30, f"`ros2 node list` to show {names}")
+    return started
+
+
+def echo_all(ros2, topic: str, *msg_type: str, once: bool = False, timeout: float = 30) -> list:
+    """`ros2 topic echo --once`, or for 3 s everything a transient_local publisher keeps,
+    retried until it prints a message; the messages as dicts.
+
+    Without QoS options, echo subscribes transient_local only if it has discovered the
+    publisher within --spin-time; otherwise volatile, and a late echo then gets nothing. The
+    whole history is asked for explicitly.
+    """
+    mode = ("--once",) if once else ("--qos-durability", "transient_local",
+                                     "--qos-reliability", "reliable", "--qos-depth", "1000")
+
+    def attempt():
+        out = ros2("topic", "echo", "--no-daemon", "--spin-time", "1", "--timeout", "3",
+                   *mode, topic, *msg_type).stdout
+        return [yaml.safe_load(message) for message in out.split("\n---")[:-1]]
+
+    return wait_for(attempt, timeout, f"a message on {topic}")
+
+
+def echo(ros2, topic: str, *msg_type: str) -> dict:
+    """`ros2 topic echo --once`: the message, as a dict."""
+    return echo_all(ros2, topic, *msg_type, once=True)[0]
+
+
+def pub_once(ros2, topic: str, msg_type: str, value: str) -> None:
+    done = ros2("topic", "pub", "--once", topic, msg_type, value)
+    assert done.returncode == 0 and "publishing #1" in done.stdout, done.stdout
+
+
+def diagnostics(ros2, until=lambda values: True, timeout: float = 30) -> dict:
+    """The estimator's /diagnostics values (``key: value``) once ``until(values)`` holds."""
+
+    def status():
+        statuses = echo(ros2, "/diagnostics")["status"]
+        ours = [s for s in statuses if s["hardware_id"] == "/estimator"]
+        assert ours, f"no status from /estimator: {statuses}"
+        values = {kv["key"]: kv["value"] for kv in ours[0]["values"]}
+        return values if until(values) else None
+
+    return wait_for(status, timeout, "the estimator's diagnostics")
+
+
+def param(ros2, verb: str, *args: str):
+    return ros2("param", verb, "--no-daemon", "--timeout", str(DISCOVERY), "/estimator", *args)
+
+
+def rounded(values) -> list[float]:
+    return [round(v, 6) for v in values]
+
+
+@time_limit(60)
+def test_pkg_executables_lists_every_entry_point(ros2):
+    listed = ros2("pkg", "executables", PKG)
+    assert listed.returncode == 0, listed.stdout
+    assert EXECUTABLES <= {line.split()[1] for line in listed.stdout.splitlines()}
+
+
+@time_limit(60)
+@pytest.mark.parametrize("node", NODES)
+def test_ros2_run_then_ctrl_c_ends_the_node_cleanly(ros2, ros2_start, node):
+    process = start_nodes(ros2, ros2_start, node)[node]
+    assert stop_group(process) == 0
+    output = process.stdout.read()
+    print(output)
+    assert "Traceback" not in output
+
+
+@time_limit(120)
+def test_example_6_14_run_with_ros2_run_and_watched_with_topic_echo(ros2, ros2_start):
+    example = params_file("example_6_14.yaml")
+    start_nodes(ros2, ros2_start, "estimator", "tile_sensor", args=example)
+    commander = ros2_start("run", PKG, "motion_commander", *example,
+                           "-p", "start_delay:=3.0", "-p", "exit_when_done:=true")
+    assert commander.wait(timeout=60) == 0, commander.stdout.read()
+    print(commander.stdout.read())
+
+    # The commander is done once its commands are sent; the estimator, once it has
+    # handled the three readings they caused.
+    values = diagnostics(ros2, lambda v: v.get("handled.tile_observation") == "3")
+    assert values["handled.motion_cmd"] == "3" and values["most_likely_cell"] == "3"
+
+    typed = echo(ros2, "/belief", "std_msgs/msg/Float64MultiArray")
+    assert rounded(typed["data"]) == FINAL_BELIEF
+    assert typed["layout"]["dim"] == [{"label": "cells", "size": 5, "stride": 5}]
+    assert rounded(echo(ros2, "/belief")["data"]) == FINAL_BELIEF
+    assert rounded(echo(ros2, "/belief_predicted")["data"]) == FINAL_PREDICTION
+
+    # The run has no position measurements: the Kalman filter only predicted (x 3, var
+    # 100 + 3 x 2). One measurement z = 4 with var_z 4: gain 106/110.
+    pub_once(ros2, "/position_measurement", "std_msgs/msg/Float64", "{data: 4.0}")
+    pose = echo(ros2, "/kalman_estimate")
+    assert round(pose["pose"]["position"]["x"], 6) == round(3 + 106 / 110, 6)
+    assert round(pose["covariance"][0], 6) == round(106 * 4 / 110, 6)
+    stamped = echo(ros2, "/kalman_estimate_stamped")
+    assert stamped["header"]["frame_id"] == "map"
+    assert stamped["pose"] == pose
+
+
+@time_limit(120)
+def test_parameters_set_get_refused_and_described(ros2, ros2_start):
+    start_nodes(ros2, ros2_start, "estimator")
+    set_ = param(ros2, "set", "kalman.var_z", "9.0")
+    assert set_.returncode == 0 and "Set parameter successful" in set_.stdout
+    assert "Double value is: 9.0" in param(ros2, "get", "kalman.var_z").stdout
+
+    refused = param(ros2, "set", "motion_kernel", "[0.5, 0.5]").stdout
+    assert "Setting parameter failed" in refused and "motion_kernel" in refused
+    read_only = param(ros2, "set", "kalman.mode", "matrix").stdout
+    assert "Setting parameter failed" in read_only and "read-only" in read_only
+    assert "String value is: scalar" in param(ros2, "get", "kalman.mode").stdout
+
+    described = param(ros2, "describe", "kalman.var_u").stdout
+    assert "Description: Variance of an executed move." in described
+
+
+@time_limit(120)
+def test_param_load_of_a_larger_world_then_an_observation(ros2, ros2_start):
+    start_nodes(ros2, ros2_start, "estimator")
+    localization = SCENARIOS / "localization.yaml"
+    loaded = param(ros2, "load", str(localization))
+    assert "Set parameter world successful" in loaded.stdout
+    assert "['bright', 'dark', 'grey']" in param(ros2, "get", "classes").stdout
+
+    pub_once(ros2, "/tile_observation", "std_msgs/msg/String", "{data: grey}")
+    world = yaml.safe_load(localization.read_text())["/**/estimator"]["ros__parameters"]["world"]
+    likelihood = np.array([0.9 if cell == "grey" else 0.05 for cell in world])
+    belief = echo(ros2, "/belief")["data"]
+    assert len(belief) == 20
+    assert rounded(belief) == rounded(likelihood / likelihood.sum())
+
+
+@time_limit(120)
+def test_reset_service_then_a_late_echo_shows_the_initial_belief(ros2, ros2_start):
+    start_nodes(ros2, ros2_start, "estimator")
+    pub_once(ros2, "/tile_observation", "std_msgs/msg/String", "{data: dark}")
+    assert rounded(echo(ros2, "/belief")["data"]) == rounded([1 / 9, 1 / 9, 1 / 3, 1 / 3, 1 / 9])
+
+    called = ros2("service", "call", "/estimator/reset", "std_srvs/srv/Trigger")
+    assert called.returncode == 0 and "success=True" in called.stdout
+    assert rounded(echo(ros2, "/belief")["data"]) == [0.2] * 5
+
+
+@time_limit(120)
+def test_huge_measurements_never_make_the_kalman_estimate_inf_or_nan(ros2, ros2_start):
+    start_nodes(ros2, ros2_start, "estimator")
+    for z in ("1.0e+308", "-1.0e+308", "2.0"):
+        pub_once(ros2, "/position_measurement", "std_msgs/msg/Float64", f"{{data: {z}}}")
+
+    def all_three_taken(values):
+        return sum(int(v) for k, v in values.items()
+                   if k == "handled.position_measurement" or k.startswith("rejected.")) == 3
+
+    values = diagnostics(ros2, all_three_taken)
+    assert math.isfinite(float(values["kalman_x"])) and math.isfinite(float(values["kalman_var"]))
+    # Everything the estimator keeps of /kalman_estimate; 2.0, at least, was published.
+    for pose in echo_all(ros2, "/kalman_estimate", "geometry_msgs/msg/PoseWithCovariance"):
+        assert math.isfinite(pose["pose"]["position"]["x"]), pose
+        assert all(math.isfinite(c) for c in pose["covariance"]), pose
