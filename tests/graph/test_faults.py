@@ -271,3 +271,29 @@ def test_bad_start_up_parameters_exit_2_naming_the_parameter(ros_env, args, mess
     output = (result.stdout + result.stderr).strip().splitlines()
     assert result.returncode == 2 and len(output) == 1, output
     assert message in output[0] and "Traceback" not in output[0]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["-p", "commands:=[]"], "commands: expected a list of at least one integer"),
+    (["-p", "commands:=[3000000000]"], "commands: 3000000000 does not fit motion_cmd"),
+])
+def test_bad_commands_end_the_commander_with_one_line(ros_env, args, message):
+    import subprocess
+
+    from tests.graph.graph_tools import executable
+
+    result = subprocess.run([executable("motion_commander"), "--ros-args", *args],
+                            env=ros_env, capture_output=True, text=True, timeout=60)
+    output = (result.stdout + result.stderr).strip().splitlines()
+    assert result.returncode == 2 and len(output) == 1, output
+    assert message in output[0] and "Traceback" not in output[0]
+
+
+def test_a_misspelled_parameter_is_warned_of_at_start_up(processes, executor):
+    from tests.graph.graph_tools import executable
+
+    estimator = processes([executable("estimator"), "--ros-args",
+                           "-p", "motion_kernal:=[0.1, 0.8, 0.1]"])
+    line = estimator.stdout.readline()
+    assert "unknown parameter 'motion_kernal' ignored" in line
+    assert "did you mean 'motion_kernel'?" in line

@@ -125,6 +125,17 @@ def test_demo_runs_a_scenario_and_exits_0(ros_env):
     assert "final belief: most likely cell 3" in result.stdout
 
 
+def test_the_default_run_localizes_and_names_the_book_s_scenarios(ros_env):
+    result = subprocess.run([executable("estimation_demo"), "--settle", "0.5", "--linger",
+                             "0.5", "--quiet"], env=ros_env, capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "localization.yaml" in result.stdout
+    hits = int(result.stdout.split("most likely cell == true cell in ")[1].split()[0])
+    assert hits >= 30, result.stdout   # 36 of 40 seeded; the book's world gives 5 of 30
+    assert "other scenarios: book_world, example_6_14, example_6_18" in result.stdout
+
+
 def test_demo_in_process_reproduces_example_6_18(ros_env):
     result = subprocess.run(
         [executable("estimation_demo"), "--scenario", "example_6_18", "--in-process",

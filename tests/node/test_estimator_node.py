@@ -283,6 +283,15 @@ def test_changes_of_several_parameters_apply_once_they_agree(driver):
     np.testing.assert_allclose(d.belief(), [0.8 / 1.8, 0.1 / 1.8, 0.1 / 1.8, 0.8 / 1.8])
 
 
+def test_a_parameter_cannot_be_deleted(driver):
+    # rclpy refuses to undeclare a statically typed parameter (`ros2 param delete`): the
+    # way back to a uniform prior is N equal values (next test).
+    d = driver(initial_belief=[1.0, 0.0, 0.0, 0.0, 0.0])
+    [result] = d.estimator.set_parameters([Parameter("initial_belief")])
+    assert not result.successful and "cannot be undeclared" in result.reason
+    assert d.estimator.has_parameter("initial_belief")
+
+
 def test_the_prior_back_to_uniform(driver):
     d = driver(initial_belief=[1.0, 0.0, 0.0, 0.0, 0.0])
     [result] = d.estimator.set_parameters([Parameter("initial_belief", value=[1.0] * 5)])
