@@ -54,14 +54,19 @@ def from_state_message(msg: Float64MultiArray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def to_pose_with_covariance(
-    x: np.ndarray, P: np.ndarray, components: Sequence[int] = (0,)
+    x: np.ndarray, P: np.ndarray, components: Sequence[int] = (0,),
+    msg: PoseWithCovariance | None = None,
 ) -> PoseWithCovariance:
     """The state components named by ``components`` (indices for x, y, z, roll, pitch, yaw;
     -1 for none) as a pose, with the matching block of P in the 6 x 6 covariance
-    (row-major over x, y, z, roll, pitch, yaw); axes without a component are 0."""
+    (row-major over x, y, z, roll, pitch, yaw); axes without a component are 0.
+
+    Fills ``msg`` when given: building a pose message costs rclpy more than the
+    filter step, and a published message may be reused (publish serializes it).
+    """
     chosen = list(components) + [-1] * (len(POSE_AXES) - len(components))
     values = [float(x[c]) if c >= 0 else 0.0 for c in chosen]
-    msg = PoseWithCovariance()
+    msg = PoseWithCovariance() if msg is None else msg
     msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = values[:3]
     (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
      msg.pose.orientation.w) = quaternion_from_rpy(*values[3:])
