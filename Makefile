@@ -5,7 +5,8 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-SOURCES := $(shell find estimation_nodes msgs_config scripts resource -type f -not -name '*.pyc') \
+SOURCES := $(shell find estimation_nodes msgs_config foxglove scripts resource -type f \
+	-not -name '*.pyc') \
 	pyproject.toml package.xml setup.py setup.cfg
 
 # DDS stays on loopback, in a domain of its own, unless the caller chose otherwise.
@@ -19,7 +20,10 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade "pip>=23"
 
+# build/ is setuptools' staging folder: a module moved or removed since the last
+# build would otherwise stay in it and be installed again.
 $(STAMP): $(BIN)/python $(SOURCES)
+	rm -rf build
 	$(BIN)/python -m pip install --quiet --upgrade ".[test]"
 	touch $@
 

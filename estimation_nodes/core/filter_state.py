@@ -103,9 +103,14 @@ class KalmanFilter:
 
     def reconfigure(
         self, initial: GaussianState, model: ScalarKalmanModel | LinearGaussianModel
-    ) -> None:
-        """New noise models apply from the next step; the initial state only on reset."""
+    ) -> bool:
+        """New models apply from the next step; the initial state only on reset, unless the
+        state size changed: then the filter restarts from it. True when it restarted."""
         self._initial, self._model = initial, model
+        if initial.x.shape == self.x.shape:
+            return False
+        self.reset()
+        return True
 
     def reset(self) -> None:
         self.x = self._initial.x.copy()

@@ -62,9 +62,11 @@ from estimation_nodes.nodes.rclpy_internals import (
 )
 from estimation_nodes.params import topics
 from estimation_nodes.params.builders import (
-    EstimatorSettings,
+    HISTOGRAM_KEYS,
+    EstimatorUpdate,
     build_estimator_settings,
     check_estimator_value,
+    update_estimator_settings,
 )
 from estimation_nodes.params.wording import plural
 from estimation_nodes.params.specs import ESTIMATOR_SPECS
@@ -81,10 +83,10 @@ class Estimator(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.node_name, **kwargs)
         self._values, settings = declare_and_build(self, ESTIMATOR_SPECS, build_estimator_settings)
-        # The settings in force and the values they were built from; self._values may
-        # run ahead of them while a change is held (see the module docstring).
+        # The settings in force and the histogram values they were built from; self._values
+        # may run ahead of them while a change is held (see the module docstring).
         self._settings = settings
-        self._consistent_values = self._values
+        self._histogram_values = {key: self._values[key] for key in HISTOGRAM_KEYS}
         self.held_reason: str | None = None
         self._histogram = HistogramFilter(
             settings.histogram, settings.initial_belief, self._values["compiled_kernels"])
@@ -92,7 +94,7 @@ class Estimator(Node):
         self.handled: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self._last_warning: dict[str, float] = {}
-        self._proposed: tuple[dict[str, Any], EstimatorSettings | None, str | None] | None = None
+        self._proposed: tuple[dict[str, Any], EstimatorUpdate] | None = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._on_parameters_set)
 
@@ -148,18 +150,11 @@ class Estimator(Node):
         try:
             for change in changes:
                 check_estimator_value(change.name, change.value)
+            proposed = overlay(self._values, changes)
+            update = update_estimator_settings(proposed, self._settings, self._histogram_values)
         except ValueError as error:
             return rejection(str(error))
-        proposed = overlay(self._values, changes)
-        try:
-            settings = build_estimator_settings(
-                proposed, previous=(self._consistent_values, self._settings))
-        except ValueError as error:
-            held = (f"held, not applied yet: {error}; the filters keep the last consistent "
-                    f"parameters until the others agree")
-            self._proposed = (proposed, None, held)
-            return SetParametersResult(successful=True)
-        self._proposed = (proposed, settings, None)
+        self._proposed = (proposed, update)
         return SetParametersResult(successful=True)
 
     def _on_parameters_set(self, _changes: list[Parameter]) -> None:
@@ -170,18 +165,24 @@ class Estimator(Node):
         """
         if self._proposed is None:
             return
+        (self._values, update), self._proposed = self._proposed, None
         was_held = self.held_reason is not None
-        (self._values, settings, self.held_reason), self._proposed = self._proposed, None
-        if settings is None:
+        self.held_reason = (f"held, not applied yet: {'; '.join(update.held)}; that part "
+                            f"keeps its last consistent parameters until the others agree"
+                            if update.held else None)
+        if self.held_reason is not None:
             self.get_logger().warning(f"parameters {self.held_reason}")
-            return
-        if was_held:
+        elif was_held:
             self.get_logger().info("parameters agree again: the held change is applied")
-        self._settings, self._consistent_values = settings, self._values
-        if self._histogram.reconfigure(settings.histogram, settings.initial_belief):
-            self.get_logger().info("new world size or prior: histogram belief reset")
-            self._belief_pub.publish(to_multiarray(self._histogram.belief, "cells"))
-        self._kalman.reconfigure(settings.kalman.initial, settings.kalman.model)
+        self._settings, self._histogram_values = update.settings, update.histogram_values
+        settings = update.settings
+        histogram_reset = self._histogram.reconfigure(settings.histogram,
+                                                      settings.initial_belief)
+        kalman_reset = self._kalman.reconfigure(settings.kalman.initial, settings.kalman.model)
+        if histogram_reset or kalman_reset:
+            self.get_logger().info("new world size, prior or Kalman state size: "
+                                   "that filter restarts from its initial state")
+            self._publish_everything()
 
     # --- events -----------------------------------------------------------------------------
 
@@ -238,6 +239,15 @@ class Estimator(Node):
             self.handled[topic] += 1
         self._publish_kalman(predicted)
 
+    def _publish_everything(self) -> None:
+        """Every output, after a restart of the filters: a late subscriber then gets the
+        state after it, not an estimate from before."""
+        belief = to_multiarray(self._histogram.belief, "cells")
+        self._belief_predicted_pub.publish(belief)
+        self._belief_pub.publish(belief)
+        for predicted in (True, False):
+            self._publish_kalman(predicted)
+
     def _publish_kalman(self, predicted: bool) -> None:
         """The estimate as a pose (with its stamped twin) and the full state, x with P."""
         state_pub, pose_pubs = ((self._state_predicted_pub, self._kalman_predicted_pubs)
@@ -261,11 +271,7 @@ class Estimator(Node):
         self._histogram.reset()
         self._kalman.reset()
         self.handled["reset"] += 1
-        belief = to_multiarray(self._histogram.belief, "cells")
-        self._belief_predicted_pub.publish(belief)
-        self._belief_pub.publish(belief)
-        for predicted in (True, False):
-            self._publish_kalman(predicted)
+        self._publish_everything()
         response.success = True
         response.message = "histogram belief and Kalman estimate back to their initial state"
         self.get_logger().info(response.message)

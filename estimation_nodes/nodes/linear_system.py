@@ -60,7 +60,15 @@ class LinearSystem(Node):
                 f"kalman_input dropped: expected {self._model.input_size} finite values, "
                 f"got {u.tolist()}", throttle_duration_sec=5.0)
             return
-        self._state, z = simulation.linear_system_step(self._state, u, self._model, self._rng)
+        with np.errstate(over="ignore", invalid="ignore"):   # checked just below
+            state, z = simulation.linear_system_step(self._state, u, self._model, self._rng)
+        if not (np.isfinite(state).all() and np.isfinite(z).all()):
+            self.rejected += 1
+            self.get_logger().warning(
+                f"kalman_input {u.tolist()} dropped: the simulated state would not be finite",
+                throttle_duration_sec=5.0)
+            return
+        self._state = state
         self._truth_pub.publish(to_multiarray(self._state, "state"))
         self._measurement_pub.publish(to_multiarray(z, "measurement"))
 

@@ -29,6 +29,7 @@ from estimation_nodes.core.models import (
     check_probability_vector,
 )
 from estimation_nodes.params.specs import (
+    MATRIX_SPECS,
     MAX_STATE,
     MAX_VARIANCE,
     MIN_VARIANCE,
@@ -123,23 +124,33 @@ class KalmanSettings:
 def build_kalman_settings(values: Mapping[str, Any]) -> KalmanSettings:
     """Kalman model and initial state from parameter values.
 
-    Both the scalar and the matrix parameters are validated whatever the mode,
-    so a bad value is refused when it is set, not when the mode changes.
+    The mode's own parameters must agree with each other; the other mode's are
+    checked one by one only (the mode is read-only, so they never run), so a
+    matrix value that does not fit the rest yet never holds up the scalar filter.
     """
     mode = _kalman_mode("kalman.mode", values["kalman.mode"])
-    x0 = _within("kalman.x0", values["kalman.x0"], -MAX_STATE, MAX_STATE)
-    P0, var_u, var_z = (_within(name, values[name], MIN_VARIANCE, MAX_VARIANCE)
-                        for name in ("kalman.P0", "kalman.var_u", "kalman.var_z"))
-    scalar = ScalarKalmanModel(var_u, var_z)
-    matrix_initial, matrix = _build_matrix_model(values, "kalman.matrix.")
-    initial = GaussianState(np.array([x0]), np.array([[P0]])) if mode == "scalar" \
-        else matrix_initial
     components = _pose_components("kalman.pose_components", values["kalman.pose_components"])
+    if mode == "scalar":
+        for name in MATRIX_NAMES:
+            check_estimator_value(name, values[name])
+        x0 = _within("kalman.x0", values["kalman.x0"], -MAX_STATE, MAX_STATE)
+        P0, var_u, var_z = (_within(name, values[name], MIN_VARIANCE, MAX_VARIANCE)
+                            for name in ("kalman.P0", "kalman.var_u", "kalman.var_z"))
+        initial = GaussianState(np.array([x0]), np.array([[P0]]))
+        model: ScalarKalmanModel | LinearGaussianModel = ScalarKalmanModel(var_u, var_z)
+    else:
+        for name in SCALAR_NAMES:
+            check_estimator_value(name, values[name])
+        initial, model = _build_matrix_model(values, "kalman.matrix.")
     n = initial.x.size
     if max(components) >= n:
         raise ValueError(f"kalman.pose_components: expected state indices below n = {n} "
                          f"(or -1), got {list(components)}")
-    return KalmanSettings(initial, scalar if mode == "scalar" else matrix, components)
+    return KalmanSettings(initial, model, components)
+
+
+SCALAR_NAMES = ("kalman.x0", "kalman.P0", "kalman.var_u", "kalman.var_z")
+MATRIX_NAMES = tuple(spec.name for spec in MATRIX_SPECS)
 
 
 def _pose_components(name: str, value: Any) -> tuple[int, ...]:
@@ -186,7 +197,15 @@ def _build_matrix_model(
     except ValueError as error:
         message = str(error)
         raise ValueError(message if message.startswith(prefix) else prefix + message) from None
+    _positive_definite(prefix + "R", model.R)
     return initial, model
+
+
+def _positive_definite(name: str, matrix: FloatArray) -> None:
+    """A measurement without noise would make S = C P C' + R singular once P is."""
+    if float(np.min(np.linalg.eigvalsh(matrix))) <= 0.0:
+        raise ValueError(f"{name}: expected a positive definite matrix (every measurement "
+                         f"has some noise), got {matrix.tolist()}")
 
 
 def _shaped(name: str, values: FloatArray, rows: int, columns: int, needs: str) -> FloatArray:
@@ -233,26 +252,54 @@ class EstimatorSettings:
 HISTOGRAM_KEYS = tuple(spec.name for spec in WORLD_SPECS) + ("initial_belief",)
 
 
-def build_estimator_settings(
-    values: Mapping[str, Any],
-    previous: tuple[Mapping[str, Any], EstimatorSettings] | None = None,
-) -> EstimatorSettings:
-    """Validate all estimator parameters together; ``ValueError`` names the first bad one.
-
-    With ``previous`` (the values and settings last built), the histogram model
-    and prior are reused when none of their parameters changed: a runtime change
-    of a Kalman variance then does not re-read a world file or rebuild the
-    likelihood tables of a million cells.
-    """
-    if previous is not None and all(
-        values.get(key) == previous[0].get(key) for key in HISTOGRAM_KEYS
-    ):
-        model, initial_belief = previous[1].histogram, previous[1].initial_belief
-    else:
-        model = build_histogram_model(values)
-        initial_belief = build_initial_belief(values, model.size)
+def build_estimator_settings(values: Mapping[str, Any]) -> EstimatorSettings:
+    """Validate all estimator parameters together; ``ValueError`` names the first bad one."""
+    model = build_histogram_model(values)
+    initial_belief = build_initial_belief(values, model.size)
     _non_empty_text("frame_id", values["frame_id"])
     return EstimatorSettings(model, initial_belief, build_kalman_settings(values))
+
+
+@dataclass(frozen=True)
+class EstimatorUpdate:
+    """What a set of parameter values changes: the settings to run on, and why a group is
+    held (its parameters do not agree yet, so it keeps its settings in force)."""
+
+    settings: EstimatorSettings
+    #: The histogram parameters the settings' histogram model was built from.
+    histogram_values: dict[str, Any]
+    held: tuple[str, ...]
+
+
+def update_estimator_settings(
+    values: Mapping[str, Any], current: EstimatorSettings, histogram_values: Mapping[str, Any]
+) -> EstimatorUpdate:
+    """New settings from ``values``, group by group: the histogram (world, classes, sensor
+    model, kernel, prior) and the Kalman filter each take the new values when those agree,
+    and keep ``current``'s part otherwise, reported as held. So a change that needs several
+    parameters waits for its last one without holding up the other group, and a Kalman
+    variance change never re-reads a world file or rebuilds the likelihood tables of a
+    million cells (``histogram_values``: what built the current histogram model).
+    """
+    held = []
+    wanted = {key: values.get(key) for key in HISTOGRAM_KEYS}
+    model, prior = current.histogram, current.initial_belief
+    if wanted != {key: histogram_values.get(key) for key in HISTOGRAM_KEYS}:
+        try:
+            model = build_histogram_model(values)
+            prior = build_initial_belief(values, model.size)
+            histogram_values = wanted
+        except ValueError as error:
+            held.append(str(error))
+            model, prior = current.histogram, current.initial_belief
+    try:
+        kalman = build_kalman_settings(values)
+    except ValueError as error:
+        held.append(str(error))
+        kalman = current.kalman
+    _non_empty_text("frame_id", values["frame_id"])
+    return EstimatorUpdate(EstimatorSettings(model, prior, kalman), dict(histogram_values),
+                           tuple(held))
 
 
 def _non_empty_text(name: str, value: Any) -> str:
@@ -305,7 +352,7 @@ _ALONE: dict[str, Callable[[str, Any], object]] = {
     "kalman.matrix.C": _entries,
     "kalman.matrix.F": _entries,
     "kalman.matrix.Q": _covariance,
-    "kalman.matrix.R": _covariance,
+    "kalman.matrix.R": lambda name, value: _positive_definite(name, _square(name, value)),
     "kalman.pose_components": _pose_components,
     "frame_id": _non_empty_text,
 }

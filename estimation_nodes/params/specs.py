@@ -7,7 +7,7 @@ offline tools read parameter files against the same defaults.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from estimation_nodes.core.models import (
@@ -52,8 +52,11 @@ WORLD_SPECS = (
 )
 
 #: Bounds on what the Kalman parameters accept. With variances and states within
-#: these, no step can overflow a double before some 1e290 steps; a result that
-#: would still not be finite (from an extreme measurement) is dropped by the filter.
+#: these, no step of the scalar filter can overflow a double before some 1e290
+#: steps. A matrix filter can still diverge (an unstable A grows P without
+#: bound); every result that would not be finite, from that or from an extreme
+#: measurement, is dropped by the filter and counted, and nothing non-finite is
+#: ever published.
 MAX_STATE = 1e12
 MIN_VARIANCE = 1e-12
 MAX_VARIANCE = 1e12
@@ -167,7 +170,8 @@ COMMANDER_SPECS = (
               "staying up.", read_only=True),
 )
 
-LINEAR_SYSTEM_SPECS = MATRIX_SPECS + (
+#: The simulated system runs one model from start to end: its matrices are read-only.
+LINEAR_SYSTEM_SPECS = tuple(replace(spec, read_only=True) for spec in MATRIX_SPECS) + (
     ParamSpec("true_initial_state", UNSET,
               "The simulated system's true initial state; unset: kalman.matrix.x0.",
               read_only=True, type_name="double_array"),

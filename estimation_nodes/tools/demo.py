@@ -203,9 +203,13 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
         for role in START_ORDER:
             name = simulator if role == "simulator" else role
             if name == "motion_commander":
-                # The monitor must hear the simulator's and the estimator's first messages.
-                spin_until(executor, lambda: monitor.publishers_matched(heard),
-                           deadline - time.monotonic())
+                # The monitor must hear the simulator's and the estimator's first messages;
+                # a node that ended (a bad parameter) ends the wait and the run.
+                spin_until(executor, lambda: monitor.publishers_matched(heard) or any(
+                    p.poll() is not None for p in processes.values()),
+                    deadline - time.monotonic())
+                if any(p.poll() is not None for p in processes.values()):
+                    break
             command = [sys.executable, "-m", NODE_MODULES[name],
                        "--ros-args", "--params-file", str(params)]
             if name == "motion_commander":
@@ -215,8 +219,8 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
             # alone, which stops each child with exactly one SIGINT.
             processes[name] = subprocess.Popen(
                 command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())}, process_group=0)
-        commander = processes["motion_commander"]
-        finished = spin_until(executor, lambda: any(p.poll() is not None
+        commander = processes.get("motion_commander")
+        finished = commander is None or spin_until(executor, lambda: any(p.poll() is not None
                                                     for p in processes.values()),
                               deadline - time.monotonic())
         failed = {n: p.returncode for n, p in processes.items()
@@ -224,9 +228,9 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
         if not finished:
             print("estimation_demo: stopped early: --timeout reached", file=sys.stderr)
             code = 1
-        elif failed or commander.poll() is None:
+        elif failed or commander is None or commander.poll() is None:
             print(f"estimation_demo: stopped early: exit codes {failed}", file=sys.stderr)
-            code = 1
+            code = 2 if 2 in failed.values() else 1   # 2: a node's parameter was invalid
         else:
             spin_until(executor, lambda: False, args.linger)
     except KeyboardInterrupt:

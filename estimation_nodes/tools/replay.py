@@ -116,8 +116,9 @@ def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comp
         except ValueError:
             return
         suffix = "_predicted" if predicted else ""
-        if shown >= 0:
-            check(topics.KALMAN_ESTIMATE + suffix, (kalman.x[shown], kalman.P[shown, shown]))
+        # The pose's x and its variance, as the estimator fills them (0 for no component).
+        pose = (kalman.x[shown], kalman.P[shown, shown]) if shown >= 0 else (0.0, 0.0)
+        check(topics.KALMAN_ESTIMATE + suffix, pose)
         check(topics.KALMAN_STATE + suffix, _flat(kalman.x, kalman.P))
 
     for topic, value in run.events:
@@ -132,8 +133,12 @@ def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comp
             except ValueError:
                 continue
             check(topics.BELIEF, belief.belief)
+        elif topic in (topics.KALMAN_INPUT, topics.KALMAN_MEASUREMENT):
+            # Subscribed in matrix mode only, as the estimator does.
+            if settings.kalman.mode == "matrix":
+                kalman_step(topic == topics.KALMAN_INPUT, value)
         else:
-            kalman_step(topic == topics.KALMAN_INPUT, value)
+            kalman_step(False, value)
     for output, online in recorded.items():
         for index in range(counts[output], len(online)):
             comparison.differences.append(

@@ -202,6 +202,8 @@ def test_huge_measurements_never_make_the_kalman_estimate_inf_or_nan(ros2, ros2_
                    if k == "handled.position_measurement" or k.startswith("rejected.")) == 3
 
     values = diagnostics(ros2, all_three_taken)
+    assert values.get("rejected.numerical_overflow") == "2", values
+    assert values.get("handled.position_measurement") == "1", values
     assert math.isfinite(float(values["kalman_x"])) and math.isfinite(float(values["kalman_var"]))
     # Everything the estimator keeps of /kalman_estimate; 2.0, at least, was published.
     for pose in echo_all(ros2, "/kalman_estimate", "geometry_msgs/msg/PoseWithCovariance"):

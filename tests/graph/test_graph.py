@@ -136,6 +136,17 @@ def test_the_default_run_localizes_and_names_the_book_s_scenarios(ros_env):
     assert "other scenarios: book_world, example_6_14, example_6_18" in result.stdout
 
 
+def test_a_node_that_cannot_start_ends_the_demo_at_once(ros_env, tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("/**/estimator:\n  ros__parameters:\n    kalman:\n      var_u: -1.0\n")
+    started = time.monotonic()
+    result = subprocess.run([executable("estimation_demo"), "--params-file", str(bad)],
+                            env=ros_env, capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stdout + result.stderr
+    assert "kalman.var_u" in result.stderr and "Traceback" not in result.stderr
+    assert time.monotonic() - started < 30   # not the 600 s --timeout
+
+
 def test_demo_in_process_reproduces_example_6_18(ros_env):
     result = subprocess.run(
         [executable("estimation_demo"), "--scenario", "example_6_18", "--in-process",

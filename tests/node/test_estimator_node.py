@@ -267,20 +267,63 @@ def test_a_change_that_does_not_fit_the_others_is_held_and_the_filter_untouched(
                                histogram.predict(before, 0, book.kernel), atol=1e-15)
 
 
-def test_changes_of_several_parameters_apply_once_they_agree(driver):
+@pytest.mark.parametrize("order, held", [
+    ((0, 1, 2), (True, True, False)),
+    ((2, 0, 1), (True, True, False)),
+    # A 3 x 3 sensor model and three classes agree with the old two-class world.
+    ((1, 2, 0), (True, False, False)),
+])
+def test_changes_of_several_parameters_apply_once_they_agree(driver, order, held):
     """Three classes need a new sensor model and world: held until the last one is set,
     in any order, as `ros2 param set` one at a time and `ros2 param load` do."""
     d = driver()
-    world = ["grey", "dark", "bright", "grey"]
-    sensor_model = [0.8, 0.1, 0.1, 0.1, 0.8, 0.1, 0.1, 0.1, 0.8]
-    for name, value in (("world", world), ("sensor_model", sensor_model),
-                        ("classes", ["bright", "dark", "grey"])):
-        assert d.estimator.held_reason is None or name != "world"
+    changes = [("world", ["grey", "dark", "bright", "grey"]),
+               ("sensor_model", [0.8, 0.1, 0.1, 0.1, 0.8, 0.1, 0.1, 0.1, 0.8]),
+               ("classes", ["bright", "dark", "grey"])]
+    for index, expect_held in zip(order, held):
+        name, value = changes[index]
         [result] = d.estimator.set_parameters([Parameter(name, value=value)])
         assert result.successful
-    assert d.estimator.held_reason is None
+        assert (d.estimator.held_reason is not None) == expect_held, name
+    assert d.estimator._histogram.belief.size == 4
     d.send(d.tile, String(data="grey"), "belief", 2)   # 1: the reset of the new world
     np.testing.assert_allclose(d.belief(), [0.8 / 1.8, 0.1 / 1.8, 0.1 / 1.8, 0.8 / 1.8])
+
+
+def test_a_held_histogram_change_does_not_hold_up_the_kalman_filter(driver):
+    d = driver()
+    [result] = d.estimator.set_parameters([Parameter("classes", value=["a", "b", "c"])])
+    assert result.successful and "sensor_model" in d.estimator.held_reason
+    [result] = d.estimator.set_parameters([Parameter("kalman.var_z", value=9.0)])
+    assert result.successful
+    assert d.estimator._settings.kalman.model.var_z == 9.0
+    assert "sensor_model" in d.estimator.held_reason   # the histogram part still waits
+
+
+def test_in_scalar_mode_a_matrix_value_is_checked_alone_and_never_holds(driver):
+    d = driver()
+    [result] = d.estimator.set_parameters([Parameter("kalman.matrix.x0", value=[0.0, 0.0])])
+    assert result.successful and d.estimator.held_reason is None
+    [result] = d.estimator.set_parameters([Parameter("kalman.matrix.Q", value=[1.0, 2.0])])
+    assert not result.successful and "kalman.matrix.Q" in result.reason
+
+
+def test_a_new_state_size_restarts_the_matrix_filter(driver, executor):
+    d = driver(**{"kalman.mode": "matrix"})
+    d.send(d.z, Float64(data=4.0), "kalman_estimate", 1)
+    for name, value in (("kalman.matrix.x0", [1.0, 0.0]),
+                        ("kalman.matrix.P0", [1.0, 0.0, 0.0, 1.0]),
+                        ("kalman.matrix.A", [1.0, 1.0, 0.0, 1.0]),
+                        ("kalman.matrix.B", [0.0, 1.0]), ("kalman.matrix.C", [1.0, 0.0]),
+                        ("kalman.matrix.F", [0.0, 1.0]), ("kalman.matrix.Q", [0.1])):
+        [result] = d.estimator.set_parameters([Parameter(name, value=value)])
+        assert result.successful, result.reason
+    assert d.estimator.held_reason is None
+    np.testing.assert_array_equal(d.estimator._kalman.x, [1.0, 0.0])   # restarted from x0
+    assert spin_until(executor, lambda: d.out.count("kalman_estimate") == 2, 5.0)
+    d.send(d.cmd, Int32(data=2), "kalman_estimate_predicted", 2)
+    np.testing.assert_allclose(d.estimator._kalman.x, [1.0, 2.0])   # A x + B u
+    assert not d.estimator.rejected
 
 
 def test_a_parameter_cannot_be_deleted(driver):

@@ -194,3 +194,29 @@ def test_commander_and_simulated_system_close_the_loop(context, executor, collec
 def test_the_scalar_kalman_still_agrees_with_algorithm_4():
     x, var = kalman.predict_scalar(3.0, 100.0, 2.0, 2.0)
     assert (x, var) == (5.0, 102.0)
+
+
+def test_the_simulated_system_drops_an_input_it_cannot_follow(context, executor,
+                                                              collector_factory):
+    params = [Parameter(k, value=v) for k, v in TRACKING.items()
+              if k.startswith("kalman.matrix.")]
+    system = LinearSystem(context=context, parameter_overrides=params)
+    executor.add_node(system)
+    out = collector_factory({"true_state": (Float64MultiArray, latched_qos(100))})
+    inputs = out.node.create_publisher(Float64MultiArray, "kalman_input", INPUT_QOS)
+    try:
+        assert spin_until(executor, lambda: inputs.get_subscription_count() >= 1, 10.0)
+        for bad in (vector(1.0), vector(float("nan"), 0.0)):
+            inputs.publish(bad)
+        # Accelerations of 1e308 push the velocity past what a double holds by the
+        # fourth step: from then on each such input is dropped, never published as inf.
+        for _ in range(6):
+            inputs.publish(vector(1.0e308, 1.0e308))
+        assert spin_until(executor, lambda: system.rejected + out.count("true_state") == 8,
+                          10.0)
+        assert system.rejected == 2 + 3 and out.count("true_state") == 3
+        assert all(np.isfinite(m.data).all() for m in out.messages["true_state"])
+        [result] = system.set_parameters([Parameter("kalman.matrix.A", value=[1.0] * 16)])
+        assert not result.successful   # read-only: the simulation runs one model
+    finally:
+        system.destroy_node()

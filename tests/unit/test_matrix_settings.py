@@ -51,6 +51,7 @@ def test_sizes_are_inferred_from_x0_b_c_and_f():
     ("matrix__Q", [0.04], "kalman.matrix.Q: expected 2 x 2 (q x q, q = columns of F), got 1"),
     ("matrix__A", [1, 0, 0, 1], "kalman.matrix.A: expected 4 x 4 (n x n), got 4 values"),
     ("matrix__P0", [1.0] * 9, "kalman.matrix.P0: expected 4 x 4 (n x n), got 9 values"),
+    ("matrix__R", [0.25, 0.0, 0.0, 0.0], "kalman.matrix.R: expected a positive definite"),
     ("pose_components", [0, 4], "kalman.pose_components: expected state indices below n = 4"),
     ("pose_components", [0, 1, 2, 3, -1, -1, 0], "kalman.pose_components: expected up to 6"),
 ])
@@ -69,7 +70,9 @@ def test_the_commander_sends_input_vectors_row_by_row():
 
 
 def test_the_simulated_system_follows_eq_6_34_exactly_without_noise():
-    model = build_kalman_settings(values(matrix__Q=[0, 0, 0, 0], matrix__R=[0, 0, 0, 0])).model
+    noisy = build_kalman_settings(values()).model
+    model = LinearGaussianModel(noisy.A, noisy.B, noisy.C, noisy.F, np.zeros((2, 2)),
+                                np.zeros((2, 2)))
     x, u = np.array([1.0, 2.0, 0.5, -0.5]), np.array([0.2, -0.4])
     x_next, z = simulation.linear_system_step(x, u, model, np.random.default_rng(0))
     np.testing.assert_allclose(x_next, model.A @ x + model.B @ u, atol=1e-15)
