@@ -51,3 +51,12 @@ def test_core_and_params_never_import_ros(layer):
              for path in modules_of(layer) for name in imported_modules(path)
              if name.split(".")[0] in ROS]
     assert not wrong, f"{layer}/ imports ROS: {wrong}"
+
+
+def test_the_core_needs_only_numpy_and_numba():
+    import sys
+
+    allowed = {"numpy", "numba", "estimation_nodes", "__future__"} | set(sys.stdlib_module_names)
+    wrong = [f"{path.name} imports {name}" for path in modules_of("core")
+             for name in imported_modules(path) if name.split(".")[0] not in allowed]
+    assert not wrong, f"core/ needs more than numpy: {wrong}"
