@@ -17,7 +17,7 @@ from tests.cli.conftest import stop_group, wait_for
 from tests.conftest import SCENARIOS
 
 PKG = "estimation_nodes"
-NODES = ("estimator", "tile_sensor", "motion_commander")
+NODES = ("estimator", "tile_sensor", "motion_commander", "linear_system")
 EXECUTABLES = {*NODES, "estimation_demo", "estimation_plot", "estimation_replay"}
 #: Example 6.14 of the book, step 3 (../shared/reference/README.md).
 FINAL_BELIEF = [0.048443, 0.063322, 0.244983, 0.528374, 0.114879]
@@ -145,6 +145,13 @@ def test_example_6_14_run_with_ros2_run_and_watched_with_topic_echo(ros2, ros2_s
     stamped = echo(ros2, "/kalman_estimate_stamped")
     assert stamped["header"]["frame_id"] == "map"
     assert stamped["pose"] == pose
+    # The whole state in one self-describing message: row 0 x, row 1 P (n = 1).
+    state = echo(ros2, "/kalman_state")
+    assert [d["label"] for d in state["layout"]["dim"]] == ["row 0: x, rows 1-1: P",
+                                                              "state component"]
+    assert rounded(state["data"]) == rounded([3 + 106 / 110, 106 * 4 / 110])
+    predicted = echo(ros2, "/kalman_estimate_predicted")   # after the third command
+    assert (predicted["pose"]["position"]["x"], predicted["covariance"][0]) == (3.0, 106.0)
 
 
 @time_limit(120)
@@ -162,6 +169,7 @@ def test_parameters_set_get_refused_and_described(ros2, ros2_start):
 
     described = param(ros2, "describe", "kalman.var_u").stdout
     assert "Description: Variance of an executed move." in described
+    assert "Min value: 1e-12" in described and "Max value: 1000000000000.0" in described
 
 
 @time_limit(120)
