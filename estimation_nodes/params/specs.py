@@ -182,10 +182,23 @@ LINEAR_SYSTEM_SPECS = tuple(replace(spec, read_only=True) for spec in MATRIX_SPE
               "kalman_measurement and send them, in order, once one is.", read_only=True),
 )
 
+#: Where a Foxglove live view listens unless told: this machine only, Foxglove's usual port.
+FOXGLOVE_HOST = "127.0.0.1"
+FOXGLOVE_PORT = 8765
+
+FOXGLOVE_VIEW_SPECS = (
+    ParamSpec("host", FOXGLOVE_HOST, "Address the Foxglove WebSocket server listens on: "
+              "127.0.0.1 for this machine only, 0.0.0.0 for every interface, or a host name.",
+              read_only=True),
+    ParamSpec("port", FOXGLOVE_PORT, "TCP port of the Foxglove WebSocket server (0: any free "
+              "port, logged at start).", read_only=True, min_value=0, max_value=65535),
+)
+
 #: Each node's parameters, by node name.
 NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "estimator": ESTIMATOR_SPECS,
     "tile_sensor": SENSOR_SPECS,
     "motion_commander": COMMANDER_SPECS,
     "linear_system": LINEAR_SYSTEM_SPECS,
+    "foxglove_view": FOXGLOVE_VIEW_SPECS,
 }

@@ -44,6 +44,13 @@ TOPIC_TYPES = {
     KALMAN_STATE_PREDICTED: "std_msgs/msg/Float64MultiArray",
 }
 
+#: The estimator's health, on the absolute name ROS's diagnostic tools read. Not in
+#: TOPIC_TYPES: a run's record and replay have no use for it; a live view shows it.
+DIAGNOSTICS = "/diagnostics"
+
+#: What a live view (Foxglove) serves: every topic of a run, and the diagnostics.
+LIVE_TOPIC_TYPES = {**TOPIC_TYPES, DIAGNOSTICS: "diagnostic_msgs/msg/DiagnosticArray"}
+
 #: What each node publishes: the demo waits for the monitor to hear each of them.
 ESTIMATOR_OUTPUTS = (BELIEF_PREDICTED, BELIEF, KALMAN_ESTIMATE, KALMAN_ESTIMATE_STAMPED,
                      KALMAN_ESTIMATE_PREDICTED, KALMAN_ESTIMATE_PREDICTED_STAMPED,

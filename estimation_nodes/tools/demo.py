@@ -24,6 +24,7 @@ from estimation_nodes.params import topics
 from estimation_nodes.params.files import check_params_file
 from estimation_nodes.tools.graph_runtime import spin_until, stop_process
 from estimation_nodes.tools.installed import share_dirs
+from estimation_nodes.tools.live_view import LiveViewError, parse_address
 from estimation_nodes.tools.recording import RecordingError
 from estimation_nodes.tools.run_record import RunRecord, summarize
 
@@ -126,6 +127,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                         help="write every topic of the run to a ROS 2 MCAP file")
     parser.add_argument("--plot", type=Path, metavar="FILE.png",
                         help="render the run as a PNG when it is over")
+    parser.add_argument("--foxglove", metavar="[HOST:]PORT",
+                        help="serve every topic live to Foxglove on a WebSocket (host "
+                             "127.0.0.1 unless given; port 0 takes a free one)")
     args = parser.parse_args(argv)
     if args.settle < 0 or args.linger < 0 or args.timeout <= 0:
         parser.error("--settle and --linger must be >= 0, --timeout > 0")
@@ -142,6 +146,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parse_args(argv)
     try:
         params = checked_params_file(args.params_file or find_scenario(args.scenario))
+        args.foxglove = foxglove_address(args.foxglove)   # (host, port) from here on
     except DemoError as error:
         print(f"estimation_demo: {error}", file=sys.stderr)
         sys.exit(2)
@@ -154,6 +159,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     except RecordingError as error:
         print(f"estimation_demo: {error}", file=sys.stderr)
         sys.exit(2)
+    except LiveViewError as error:
+        print(f"estimation_demo: --foxglove: {error}", file=sys.stderr)
+        sys.exit(2)
     print(summarize(record))
     print(other_scenarios(params))
     if args.record:
@@ -165,19 +173,58 @@ def main(argv: Sequence[str] | None = None) -> None:
     sys.exit(code)
 
 
-def make_monitor(params: Path, args: argparse.Namespace):
-    """The monitor node, writing an MCAP file when --record asks for one."""
-    from estimation_nodes.tools.monitor import RunMonitor
-    from estimation_nodes.tools.recording import McapRunWriter
+def foxglove_address(text: str | None) -> tuple[str, int] | None:
+    if text is None:
+        return None
+    try:
+        return parse_address(text)
+    except LiveViewError as error:
+        raise DemoError(f"--foxglove: {error}") from None
 
-    writer = None
-    if args.record:
-        metadata = {"parameters_yaml": params.read_text(encoding="utf-8"),
-                    "parameters_file": str(params)}
-        # Topics as the nodes resolve them: this script runs them in the root namespace.
-        writer = McapRunWriter(args.record, {f"/{t}": n for t, n in topics.TOPIC_TYPES.items()},
-                               metadata)
-    return RunMonitor(quiet=args.quiet, writer=writer), writer
+
+def resolved(topic_types: dict[str, str]) -> dict[str, str]:
+    """Topics as the nodes resolve them: this script runs them in the root namespace."""
+    return {topic if topic.startswith("/") else f"/{topic}": name
+            for topic, name in topic_types.items()}
+
+
+def make_sinks(params: Path, args: argparse.Namespace) -> list:
+    """Where the monitor writes raw messages: the Foxglove live view (--foxglove), the MCAP
+    file (--record). The live view starts first: a port in use fails before a file is made."""
+    sinks: list = []
+    try:
+        if args.foxglove:
+            from estimation_nodes.tools.live_view import LiveView
+
+            view = LiveView(*args.foxglove, resolved(topics.LIVE_TOPIC_TYPES))
+            sinks.append(view)
+            print(f"estimation_demo: Foxglove live view on {view.url} (in Foxglove: Open "
+                  f"connection, Foxglove WebSocket)", flush=True)
+        if args.record:
+            from estimation_nodes.tools.recording import McapRunWriter
+
+            metadata = {"parameters_yaml": params.read_text(encoding="utf-8"),
+                        "parameters_file": str(params)}
+            sinks.append(McapRunWriter(args.record, resolved(topics.TOPIC_TYPES), metadata))
+    except Exception:
+        close_sinks(sinks)
+        raise
+    return sinks
+
+
+def close_sinks(sinks: list) -> None:
+    for sink in sinks:
+        sink.close()
+
+
+def make_monitor(args: argparse.Namespace, sinks: list):
+    """The monitor node, feeding ``sinks``."""
+    from estimation_nodes.tools.monitor import RunMonitor
+
+    # /diagnostics only when a live view shows it: the monitor has no other use for it.
+    extra = {topics.DIAGNOSTICS: topics.LIVE_TOPIC_TYPES[topics.DIAGNOSTICS]} \
+        if args.foxglove else {}
+    return RunMonitor(quiet=args.quiet, sinks=sinks, sink_only_topics=extra)
 
 
 # --- running the graph -----------------------------------------------------------------------
@@ -192,10 +239,12 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
     processes: dict[str, subprocess.Popen] = {}
     rclpy.init()
     executor = SingleThreadedExecutor()
-    monitor = writer = None
+    monitor = None
+    sinks: list = []
     code = 0
     try:
-        monitor, writer = make_monitor(params, args)
+        sinks = make_sinks(params, args)
+        monitor = make_monitor(args, sinks)
         executor.add_node(monitor)
         deadline = time.monotonic() + args.timeout
         simulator = simulator_for(params)
@@ -242,8 +291,7 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
             stop_process(process)
         if monitor is not None:
             monitor.destroy_node()
-        if writer is not None:
-            writer.close()
+        close_sinks(sinks)
         executor.shutdown()
         rclpy.try_shutdown()
     return code, monitor.record if monitor is not None else RunRecord()
@@ -265,11 +313,11 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     rclpy.init(args=["estimation_demo", *ros_args])
     executor = SingleThreadedExecutor()
     nodes = []
-    writer = None
+    sinks: list = []
     code = 0
     try:
-        monitor, writer = make_monitor(params, args)
-        nodes.append(monitor)
+        sinks = make_sinks(params, args)
+        nodes.append(make_monitor(args, sinks))
         simulator = LinearSystem if simulator_for(params) == "linear_system" else TileSensor
         for node_class in (Estimator, simulator, MotionCommander):
             nodes.append(node_class())
@@ -292,8 +340,7 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
         ignore_further_interrupts()
         for node in nodes:
             node.destroy_node()
-        if writer is not None:
-            writer.close()
+        close_sinks(sinks)
         executor.shutdown()
         rclpy.try_shutdown()
     return code, nodes[0].record if nodes else RunRecord()

@@ -1,26 +1,49 @@
-"""The demo's observer: takes every topic of the run raw, records, prints, optionally writes MCAP.
+"""The demo's observer: takes every topic of the run raw, records, prints, feeds raw sinks.
 
-One raw subscription per topic: the CDR bytes go unchanged into the MCAP file
-(when recording) and are deserialized once for the RunRecord and the display.
+One raw subscription per topic: the CDR bytes go unchanged to each sink (the
+MCAP recorder, the Foxglove live view) and are deserialized once for the
+RunRecord and the display.
 """
 
 from __future__ import annotations
 
 import importlib
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping, Sequence
+from typing import Protocol
 
 import numpy as np
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
 from estimation_nodes.nodes.messages import from_state_message
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.tools.recording import McapRunWriter
 from estimation_nodes.tools.run_record import RunRecord
 
 BARS = " ▁▂▃▄▅▆▇█"
+
+
+class RawSink(Protocol):
+    """Where raw messages go: the MCAP recorder, the Foxglove live view."""
+
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
+        """``topic`` as resolved; ``data`` the CDR bytes; receive and source times in ns."""
+
+
+def observer_qos(topic: str) -> QoSProfile | int:
+    """The QoS to observe a topic of the graph with, as its publisher offers it.
+
+    Inputs are volatile; the outputs are latched, and an observer that matches
+    a publisher late still gets what it kept. /diagnostics is a plain depth-10
+    publisher: a transient_local request would not match it.
+    """
+    if topic in topics.INPUTS:
+        return INPUT_QOS
+    if topic == topics.DIAGNOSTICS:
+        return 10
+    return latched_qos(1000)
 
 
 def message_class(type_name: str) -> type:
@@ -51,16 +74,21 @@ def bars(belief: np.ndarray) -> str:
 
 
 class RunMonitor(Node):
-    """Subscribes to every topic of the run; keeps a RunRecord; prints each estimate."""
+    """Subscribes to every topic of the run; keeps a RunRecord; prints each estimate.
 
-    def __init__(self, quiet: bool = False, writer: McapRunWriter | None = None,
-                 **kwargs) -> None:
+    Every raw message goes to each of ``sinks``; ``sink_only_topics`` (name ->
+    ROS type) are taken for the sinks alone, neither recorded nor printed.
+    """
+
+    def __init__(self, quiet: bool = False, sinks: Sequence[RawSink] = (),
+                 sink_only_topics: Mapping[str, str] | None = None, **kwargs) -> None:
         super().__init__("estimation_demo_monitor", **kwargs)
         self.record = RunRecord()
         self._quiet = quiet
-        self._writer = writer
-        self._types = {topic: message_class(name) for topic, name in topics.TOPIC_TYPES.items()}
-        handlers: dict[str, Callable[[object], None]] = {
+        self._sinks = tuple(sinks)
+        observed = {**topics.TOPIC_TYPES, **(sink_only_topics or {})}
+        self._types = {topic: message_class(name) for topic, name in observed.items()}
+        handlers: dict[str, Callable[[object], None] | None] = {
             topics.TRUE_POSITION: lambda msg: self.record.truth.append(msg.data),
             topics.BELIEF_PREDICTED: self._on_predicted,
             topics.BELIEF: self._on_corrected,
@@ -78,9 +106,10 @@ class RunMonitor(Node):
             handlers[topic] = lambda msg, t=topic: self.record.add_event(t, input_value(msg))
         self._subscriptions_by_topic = {}
         for topic, msg_type in self._types.items():
-            qos = INPUT_QOS if topic in topics.INPUTS else latched_qos(1000)
             self._subscriptions_by_topic[topic] = self.create_subscription(
-                msg_type, topic, self._raw_handler(topic, handlers[topic]), qos, raw=True)
+                msg_type, topic,
+                self._raw_handler(topic, handlers[topic] if topic in topics.TOPIC_TYPES else None),
+                observer_qos(topic), raw=True)
 
     def publishers_matched(self, published: tuple[str, ...]) -> bool:
         """Whether each of the ``published`` topics has a matched publisher.
@@ -90,15 +119,18 @@ class RunMonitor(Node):
         return all(self._subscriptions_by_topic[topic].get_publisher_count() >= 1
                    for topic in published)
 
-    def _raw_handler(self, topic: str, handle: Callable[[object], None]):
+    def _raw_handler(self, topic: str, handle: Callable[[object], None] | None):
         msg_type = self._types[topic]
         resolved = self.resolve_topic_name(topic)
 
         def on_raw(data: bytes, info: dict) -> None:
-            if self._writer is not None:
-                self._writer.write(resolved, data, time.time_ns(),
-                                   info.get("source_timestamp") or time.time_ns())
-            handle(deserialize_message(data, msg_type))
+            if self._sinks:
+                received = time.time_ns()
+                published = info.get("source_timestamp") or received
+                for sink in self._sinks:
+                    sink.write(resolved, data, received, published)
+            if handle is not None:
+                handle(deserialize_message(data, msg_type))
 
         return on_raw
 

@@ -102,8 +102,13 @@ class McapRunWriter:
         self._writer.add_metadata(METADATA_NAME, metadata)
 
     def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
+        """Add one raw message; a topic the file was not made with (/diagnostics, which
+        only the live view serves) is skipped."""
+        channel = self._channels.get(topic)
+        if channel is None:
+            return
         self._sequence += 1
-        self._writer.add_message(self._channels[topic], log_time=log_time_ns, data=data,
+        self._writer.add_message(channel, log_time=log_time_ns, data=data,
                                  publish_time=publish_time_ns, sequence=self._sequence)
 
     def close(self) -> None:
