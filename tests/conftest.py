@@ -97,11 +97,17 @@ class Collector:
 
         self.node = Node(name, context=context)
         self.messages: dict[str, list] = defaultdict(list)
+        #: The DDS source timestamp (ns) of each message, beside ``messages``.
+        self.stamps: dict[str, list[int]] = defaultdict(list)
         self.subscriptions = {}
         for topic, spec in topics.items():
             msg_type, qos = spec if isinstance(spec, tuple) else (spec, latched_qos(1000))
             self.subscriptions[topic] = self.node.create_subscription(
-                msg_type, topic, lambda msg, t=topic: self.messages[t].append(msg), qos)
+                msg_type, topic, lambda msg, info, t=topic: self._keep(t, msg, info), qos)
+
+    def _keep(self, topic: str, msg, info: dict) -> None:
+        self.messages[topic].append(msg)
+        self.stamps[topic].append(info["source_timestamp"])
 
     def count(self, topic: str) -> int:
         return len(self.messages[topic])
@@ -136,7 +142,8 @@ def processes(ros_env):
     started: list[subprocess.Popen] = []
 
     def start(command, **kwargs):
-        process = subprocess.Popen(command, env=ros_env, stdout=subprocess.PIPE,
+        kwargs.setdefault("env", ros_env)
+        process = subprocess.Popen(command, stdout=subprocess.PIPE,
                                    stderr=subprocess.STDOUT, text=True, **kwargs)
         started.append(process)
         return process

@@ -28,11 +28,18 @@ class HistogramFilter:
     """The histogram belief over the world's cells."""
 
     def __init__(
-        self, model: HistogramModel, initial_belief: FloatArray, allow_compiled: bool = True
+        self,
+        model: HistogramModel,
+        initial_belief: FloatArray,
+        allow_compiled: bool = True,
+        in_place: bool = True,
     ) -> None:
         self._model = model
         self._initial_belief = initial_belief
         self._allow_compiled = allow_compiled
+        # A correction in place saves an allocation per step on large worlds; a filter
+        # whose snapshots are kept (causal_order.py) makes a new array each step instead.
+        self._in_place = in_place
         self.belief: FloatArray = initial_belief.copy()
         self.last_evidence = float("nan")
         self.compiled = self._prepare_kernels()
@@ -60,6 +67,13 @@ class HistogramFilter:
         self.belief = self._initial_belief.copy()
         self.last_evidence = float("nan")
 
+    def snapshot(self) -> tuple[FloatArray, float]:
+        """The belief and last evidence; valid while steps make new arrays (in_place False)."""
+        return self.belief, self.last_evidence
+
+    def restore(self, state: tuple[FloatArray, float]) -> None:
+        self.belief, self.last_evidence = state
+
     def predict(self, u: int) -> FloatArray:
         self.belief = histogram.predict(self.belief, u, self._model.kernel, compiled=self.compiled)
         return self.belief
@@ -70,7 +84,8 @@ class HistogramFilter:
         # In place: the belief is this filter's own array (predict and reset make new
         # ones, and publishing copies it), and correct() leaves it alone on an error.
         self.belief, self.last_evidence = histogram.correct(
-            self.belief, likelihood, out=self.belief, compiled=self.compiled)
+            self.belief, likelihood, out=self.belief if self._in_place else None,
+            compiled=self.compiled)
         return self.belief
 
 
@@ -116,6 +131,13 @@ class KalmanFilter:
         self.x = self._initial.x.copy()
         self.P = self._initial.P.copy()
         self.last_nis = float("nan")
+
+    def snapshot(self) -> tuple[FloatArray, FloatArray, float]:
+        """x, P and the last NIS; steps replace x and P, never modify them."""
+        return self.x, self.P, self.last_nis
+
+    def restore(self, state: tuple[FloatArray, FloatArray, float]) -> None:
+        self.x, self.P, self.last_nis = state
 
     @property
     def estimate(self) -> PositionEstimate:

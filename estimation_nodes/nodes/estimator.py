@@ -1,10 +1,13 @@
 """The estimator node: histogram and Kalman filters over the core, fed by topics.
 
-Events are handled one at a time in arrival order: ``motion_cmd`` predicts
-both filters, ``tile_observation`` corrects the histogram, and
-``position_measurement`` corrects the Kalman filter. A bad message, or one
-whose result would not be finite, is dropped with a throttled warning and
-counted; the filters are left untouched.
+``motion_cmd`` predicts both filters, ``tile_observation`` corrects the
+histogram, and ``position_measurement`` corrects the Kalman filter. Events are
+applied in the order they happened, by their source timestamps, not in the
+order DDS delivered them (core/causal_order.py): a reading that arrives before
+the move that caused it is applied at once, and when the move comes the
+filters go back, apply it, apply the reading again and republish. A bad
+message, or one whose result would not be finite, is dropped with a
+throttled warning and counted; the filters are left untouched.
 
 A parameter change that is right on its own but does not fit the others yet
 (three classes with a 2 x 2 sensor model, a 20-cell world with a 5-cell prior)
@@ -32,11 +35,13 @@ from rclpy.event_handler import (
 from rclpy.qos import qos_policy_name_from_kind
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.time import Time
 from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
 
 from estimation_nodes.core import histogram, kalman
+from estimation_nodes.core.causal_order import CausalOrder, Submission
 from estimation_nodes.core.filter_state import (
     HistogramFilter,
     KalmanFilter,
@@ -66,6 +71,7 @@ from estimation_nodes.params.builders import (
     EstimatorUpdate,
     build_estimator_settings,
     check_estimator_value,
+    reorder_max_events,
     update_estimator_settings,
 )
 from estimation_nodes.params.wording import plural
@@ -73,6 +79,8 @@ from estimation_nodes.params.specs import ESTIMATOR_SPECS
 
 #: Seconds between two warnings about the same kind of rejected message.
 WARN_THROTTLE_S = 5.0
+#: Order of events stamped at the same instant: a move before the readings after it.
+MOVE, READING = 0, 1
 
 
 class Estimator(Node):
@@ -88,10 +96,20 @@ class Estimator(Node):
         self._settings = settings
         self._histogram_values = {key: self._values[key] for key in HISTOGRAM_KEYS}
         self.held_reason: str | None = None
+        horizon_ns = round(self._values["reorder_horizon"] * 1e9)
+        # Saved states must stay as they were: with a history, corrections make new arrays.
         self._histogram = HistogramFilter(
-            settings.histogram, settings.initial_belief, self._values["compiled_kernels"])
+            settings.histogram, settings.initial_belief, self._values["compiled_kernels"],
+            in_place=horizon_ns == 0)
         self._kalman = KalmanFilter(settings.kalman.initial, settings.kalman.model)
+        self._order: CausalOrder | None = CausalOrder(self, horizon_ns, reorder_max_events(
+            self._values["reorder_memory_mb"], settings.histogram.size,
+            settings.kalman.initial.x.size)) if horizon_ns else None
+        #: When the event being applied happened (ns): the stamp of the stamped outputs.
+        self._event_stamp_ns = 0
         self.handled: Counter[str] = Counter()
+        #: What the reorder history did: events put in their place, applied again, ...
+        self.reordering: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self._last_warning: dict[str, float] = {}
         self._proposed: tuple[dict[str, Any], EstimatorUpdate] | None = None
@@ -119,20 +137,21 @@ class Estimator(Node):
         self.qos_incompatible: Counter[str] = Counter()
         self._input_events = SubscriptionEvents(self.default_callback_group)
         inputs = [
-            (Int32, topics.MOTION_CMD, self._on_motion_cmd),
-            (String, topics.TILE_OBSERVATION, self._on_tile_observation),
-            (Float64, topics.POSITION_MEASUREMENT, self._on_position_measurement),
+            (Int32, topics.MOTION_CMD, self._on_motion_cmd, MOVE),
+            (String, topics.TILE_OBSERVATION, self._on_tile_observation, READING),
+            (Float64, topics.POSITION_MEASUREMENT, self._on_position_measurement, READING),
         ]
         # The vector inputs only in matrix mode (read-only): every subscription costs the
         # executor time on each message, and the scalar filter takes single numbers.
         if settings.kalman.mode == "matrix":
             inputs += [
-                (Float64MultiArray, topics.KALMAN_INPUT, self._on_kalman_input),
-                (Float64MultiArray, topics.KALMAN_MEASUREMENT, self._on_kalman_measurement),
+                (Float64MultiArray, topics.KALMAN_INPUT, self._on_kalman_input, MOVE),
+                (Float64MultiArray, topics.KALMAN_MEASUREMENT, self._on_kalman_measurement,
+                 READING),
             ]
-        for msg_type, topic, callback in inputs:
+        for msg_type, topic, handler, rank in inputs:
             subscription = self.create_subscription(
-                msg_type, topic, callback, INPUT_QOS,
+                msg_type, topic, self._arrival(handler, rank), INPUT_QOS,
                 event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
             self._watch_input_events(subscription, topic)
         self.add_waitable(self._input_events)
@@ -176,6 +195,10 @@ class Estimator(Node):
             self.get_logger().info("parameters agree again: the held change is applied")
         self._settings, self._histogram_values = update.settings, update.histogram_values
         settings = update.settings
+        # Past events were applied with the previous parameters: a late one cannot be put
+        # in its place among them any more.
+        if self._order is not None:
+            self._order.clear()
         histogram_reset = self._histogram.reconfigure(settings.histogram,
                                                       settings.initial_belief)
         kalman_reset = self._kalman.reconfigure(settings.kalman.initial, settings.kalman.model)
@@ -186,62 +209,114 @@ class Estimator(Node):
 
     # --- events -----------------------------------------------------------------------------
 
-    def _on_motion_cmd(self, msg: Int32) -> None:
+    def _arrival(self, handler: Any, rank: int) -> Any:
+        """The subscription callback of one input: the message with when it happened, to
+        the causal order (or straight to ``handler`` when there is none)."""
+
+        def on_message(msg: Any, info: dict) -> None:
+            # The publisher's clock: the order of events across topics and hosts.
+            stamp = info.get("source_timestamp") or info.get("received_timestamp") \
+                or time.time_ns()
+            if self._order is None:
+                self._event_stamp_ns = stamp
+                handler(msg, True)
+                return
+            self._account(self._order.submit(stamp, rank, (stamp, handler, msg)))
+
+        return on_message
+
+    # Replayable, for the causal order: the state of both filters, and one event.
+
+    def snapshot(self) -> tuple[Any, Any]:
+        return self._histogram.snapshot(), self._kalman.snapshot()
+
+    def restore(self, state: tuple[Any, Any]) -> None:
+        histogram_state, kalman_state = state
+        self._histogram.restore(histogram_state)
+        self._kalman.restore(kalman_state)
+
+    def apply(self, event: tuple[int, Any, Any], first_time: bool) -> bool:
+        self._event_stamp_ns, handler, msg = event
+        return handler(msg, first_time)
+
+    def _account(self, submission: Submission) -> None:
+        if submission.reordered:
+            self.reordering["reordered"] += 1
+            self.reordering["reapplied"] += submission.reapplied
+        if submission.dropped_on_reapply:
+            self.reordering["dropped_on_reapply"] += submission.dropped_on_reapply
+        if submission.too_late:
+            self.reordering["too_late"] += 1
+            self._warn("too_late", "an event older than the reorder history arrived: applied "
+                       "now, out of order (raise reorder_horizon or reorder_memory_mb; events "
+                       f"so far: {self.reordering['too_late']})")
+
+    def _on_motion_cmd(self, msg: Int32, first_time: bool) -> bool:
         self._histogram.predict(msg.data)
-        self.handled["motion_cmd"] += 1
+        if first_time:
+            self.handled["motion_cmd"] += 1
         self._belief_predicted_pub.publish(to_multiarray(self._histogram.belief, "cells"))
         # A filter with m = 1 input takes the command as u; a larger one takes kalman_input.
         if self._kalman.input_size == 1:
-            self._kalman_step(True, float(msg.data), topics.MOTION_CMD)
+            self._kalman_step(True, float(msg.data), topics.MOTION_CMD, first_time)
+        return True
 
-    def _on_kalman_input(self, msg: Float64MultiArray) -> None:
-        self._kalman_step(True, self._vector(msg), topics.KALMAN_INPUT)
+    def _on_kalman_input(self, msg: Float64MultiArray, first_time: bool) -> bool:
+        return self._kalman_step(True, self._vector(msg), topics.KALMAN_INPUT, first_time)
 
-    def _on_tile_observation(self, msg: String) -> None:
+    def _on_tile_observation(self, msg: String, first_time: bool) -> bool:
         try:
             self._histogram.correct(msg.data)
         except histogram.ZeroEvidenceError as error:
-            self._reject("zero_evidence", f"tile_observation {msg.data!r} dropped: {error}")
-            return
+            self._reject("zero_evidence", f"tile_observation {msg.data!r} dropped: {error}",
+                         counted=first_time)
+            return False
         except ValueError as error:
-            self._reject("unknown_class", f"tile_observation dropped: {error}")
-            return
-        self.handled["tile_observation"] += 1
+            self._reject("unknown_class", f"tile_observation dropped: {error}",
+                         counted=first_time)
+            return False
+        if first_time:
+            self.handled["tile_observation"] += 1
         self._belief_pub.publish(to_multiarray(self._histogram.belief, "cells"))
+        return True
 
-    def _on_position_measurement(self, msg: Float64) -> None:
-        self._kalman_step(False, msg.data, topics.POSITION_MEASUREMENT)
+    def _on_position_measurement(self, msg: Float64, first_time: bool) -> bool:
+        return self._kalman_step(False, msg.data, topics.POSITION_MEASUREMENT, first_time)
 
-    def _on_kalman_measurement(self, msg: Float64MultiArray) -> None:
-        self._kalman_step(False, self._vector(msg), topics.KALMAN_MEASUREMENT)
+    def _on_kalman_measurement(self, msg: Float64MultiArray, first_time: bool) -> bool:
+        return self._kalman_step(False, self._vector(msg), topics.KALMAN_MEASUREMENT,
+                                 first_time)
 
     @staticmethod
     def _vector(msg: Float64MultiArray) -> np.ndarray:
         return np.frombuffer(msg.data, dtype=np.float64)
 
-    def _kalman_step(self, predicted: bool, value: Any, topic: str) -> None:
+    def _kalman_step(self, predicted: bool, value: Any, topic: str, first_time: bool) -> bool:
         """One Kalman prediction (or correction) from ``topic``; the result published, or
-        the input dropped and counted with the filter untouched."""
+        the input dropped (and counted, the first time) with the filter untouched."""
         try:
             (self._kalman.predict if predicted else self._kalman.correct)(value)
         except NonFiniteResultError as error:
-            self._reject("numerical_overflow", f"{topic} {value!r} dropped: {error}")
-            return
+            self._reject("numerical_overflow", f"{topic} {value!r} dropped: {error}",
+                         counted=first_time)
+            return False
         except kalman.InputSizeError as error:
-            self._reject(f"wrong_size.{topic}", f"{topic} dropped: {error}")
-            return
+            self._reject(f"wrong_size.{topic}", f"{topic} dropped: {error}", counted=first_time)
+            return False
         except ValueError as error:   # NaN or inf
             reason = "non_finite_measurement" if topic == topics.POSITION_MEASUREMENT \
                 else f"non_finite.{topic}"
-            self._reject(reason, f"{topic} dropped: {error}")
-            return
-        if topic != topics.MOTION_CMD:
+            self._reject(reason, f"{topic} dropped: {error}", counted=first_time)
+            return False
+        if first_time and topic != topics.MOTION_CMD:
             self.handled[topic] += 1
         self._publish_kalman(predicted)
+        return True
 
     def _publish_everything(self) -> None:
         """Every output, after a restart of the filters: a late subscriber then gets the
         state after it, not an estimate from before."""
+        self._event_stamp_ns = self.get_clock().now().nanoseconds
         belief = to_multiarray(self._histogram.belief, "cells")
         self._belief_predicted_pub.publish(belief)
         self._belief_pub.publish(belief)
@@ -261,7 +336,8 @@ class Estimator(Node):
         pose = to_pose_with_covariance(
             x, P, self._settings.kalman.pose_components, stamped.pose)
         plain.publish(pose)
-        stamped.header.stamp = self.get_clock().now().to_msg()
+        # When the event this estimate follows from happened, as ROS estimators stamp.
+        stamped.header.stamp = Time(seconds=0, nanoseconds=self._event_stamp_ns).to_msg()
         stamped.header.frame_id = self._values["frame_id"]
         stamped_pub.publish(stamped)
 
@@ -270,6 +346,8 @@ class Estimator(Node):
         gets the state after the reset, not an estimate from before it."""
         self._histogram.reset()
         self._kalman.reset()
+        if self._order is not None:
+            self._order.clear()
         self.handled["reset"] += 1
         self._publish_everything()
         response.success = True
@@ -323,12 +401,19 @@ class Estimator(Node):
         self._input_events.destroy()
         super().destroy_node()
 
-    def _reject(self, reason: str, message: str, count: int = 1) -> None:
+    def _reject(self, reason: str, message: str, count: int = 1, counted: bool = True) -> None:
+        """Count (unless ``counted`` is False: an event applied again, counted the first
+        time) and warn, at most once per WARN_THROTTLE_S for each reason."""
+        if not counted:
+            return
         self.rejected[reason] += count
+        self._warn(reason, f"{message} (rejected so far: {self.rejected[reason]})")
+
+    def _warn(self, reason: str, message: str) -> None:
         now = time.monotonic()
         if now - self._last_warning.get(reason, -math.inf) >= WARN_THROTTLE_S:
             self._last_warning[reason] = now
-            self.get_logger().warning(f"{message} (rejected so far: {self.rejected[reason]})")
+            self.get_logger().warning(message)
 
     # --- health -----------------------------------------------------------------------------
 
@@ -348,6 +433,7 @@ class Estimator(Node):
             values["kalman_nis"] = f"{self._kalman.last_nis:.6g}"
         values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
         values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
+        values.update({f"events.{k}": v for k, v in sorted(self.reordering.items())})
         values.update({f"incompatible_publishers.{k}": v
                        for k, v in sorted(self.qos_incompatible.items())})
         problems = []

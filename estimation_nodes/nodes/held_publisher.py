@@ -1,44 +1,82 @@
-"""A reading publisher that loses nothing published before anyone listens."""
+"""A reading publisher that loses nothing published before the nodes that need it listen."""
 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Sequence
 
 from rclpy.event_handler import PublisherEventCallbacks
 from rclpy.node import Node
 
 from estimation_nodes.nodes.qos import INPUT_QOS
+from estimation_nodes.nodes.subscribers import missing_subscribers
 
-#: Readings kept per topic while nobody listens; the oldest go first beyond that.
+#: Readings kept per topic while the required subscribers are not there; the oldest go
+#: first beyond that.
 HOLD_LIMIT = 1000
+#: Seconds between checks of the graph while something is held (never while idle).
+HOLD_CHECK_PERIOD_S = 0.02
 
 
 class HeldPublisher:
-    """A publisher that keeps its messages while no subscription is matched.
+    """A publisher that keeps its messages until the nodes in ``hold_for`` are matched.
 
-    What it held goes out, in order, on DDS's matched event: nothing polls
-    while the sensor is idle.
+    With ``hold_for`` empty, any matched subscription will do. What it held goes
+    out, in order, on DDS's matched event or at the next check of the graph
+    (every HOLD_CHECK_PERIOD_S while something is held; nothing polls while
+    the sensor is idle).
     """
 
-    def __init__(self, node: Node, msg_type: type, topic: str, hold: bool) -> None:
+    def __init__(self, node: Node, msg_type: type, topic: str, hold: bool,
+                 hold_for: Sequence[str] = ()) -> None:
+        self._node = node
         self._publisher = node.create_publisher(
             msg_type, topic, INPUT_QOS,
             event_callbacks=PublisherEventCallbacks(matched=lambda _info: self.flush()))
         self._hold = hold
+        self._hold_for = tuple(name for name in hold_for if name)
         self._held: deque = deque(maxlen=HOLD_LIMIT)
+        self._timer = None
+        #: Matched subscriptions when the required nodes were last seen matched.
+        self._ready_at: int | None = None
 
     @property
     def held(self) -> int:
         return len(self._held)
 
+    def ready(self) -> bool:
+        """Whether a message published now reaches every node it must.
+
+        The graph is asked again only when fewer subscriptions are matched than when it
+        last said yes: a query costs more than a publish.
+        """
+        count = self._publisher.get_subscription_count()
+        if count == 0:
+            return False
+        if self._ready_at is not None and count >= self._ready_at:
+            return True
+        self._ready_at = None
+        if self._hold_for and missing_subscribers(self._node, self._publisher, self._hold_for):
+            return False
+        self._ready_at = count
+        return True
+
     def publish(self, msg) -> None:
-        if self._hold and (self._held or self._publisher.get_subscription_count() == 0):
+        if self._hold and (self._held or not self.ready()):
             self._held.append(msg)
+            self._check_until_flushed()
             return
         self._publisher.publish(msg)
 
+    def _check_until_flushed(self) -> None:
+        if self._timer is None:
+            self._timer = self._node.create_timer(HOLD_CHECK_PERIOD_S, self.flush)
+
     def flush(self) -> None:
-        """Send what was held, in order, once a subscription is matched."""
-        if self._held and self._publisher.get_subscription_count() > 0:
+        """Send what was held, in order, once the required subscribers are matched."""
+        if self._held and self.ready():
             while self._held:
                 self._publisher.publish(self._held.popleft())
+        if not self._held and self._timer is not None:
+            self._node.destroy_timer(self._timer)
+            self._timer = None

@@ -43,7 +43,8 @@ class LinearSystem(Node):
         self._truth_pub = self.create_publisher(
             Float64MultiArray, topics.TRUE_STATE, latched_qos(100))
         self._measurement_pub = HeldPublisher(
-            self, Float64MultiArray, topics.KALMAN_MEASUREMENT, values["hold_until_matched"])
+            self, Float64MultiArray, topics.KALMAN_MEASUREMENT, values["hold_until_matched"],
+            values["hold_for_nodes"])
         self.create_subscription(
             Float64MultiArray, topics.KALMAN_INPUT, self._on_kalman_input, INPUT_QOS)
         self.rejected = 0

@@ -1,13 +1,14 @@
 """Publishes a sequence of motion commands (or Kalman input vectors) at a fixed rate.
 
 No command is lost at start-up: the first one goes out only once
-``required_subscribers`` subscriptions are matched on ``motion_cmd`` (the
-tile sensor and the estimator by default) and ``start_delay`` has passed
-after that, so the rest of the graph has time to discover itself. Later,
-while fewer subscribers are matched (a node restarting), the commander
-pauses and resumes ``start_delay`` after they are back. A node that crashes is noticed only
-when DDS drops it (its lease, 20 s by default), so commands sent before then
-are lost to it.
+``required_subscribers`` subscriptions are matched on ``motion_cmd``, the
+``required_nodes`` (the estimator and the tile sensor by default) among them
+(subscribers.py: a recorder beside the graph never stands in for one), and
+``start_delay`` has passed after that, so the rest of the graph has time to
+discover itself. Later, while they are not all matched (a node restarting),
+the commander pauses and resumes ``start_delay`` after they are back. A node
+that crashes is noticed only when DDS drops it (its lease, 20 s by default), so
+commands sent before then are lost to it.
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ from estimation_nodes.nodes.parameters import (
 from estimation_nodes.nodes.messages import to_multiarray
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS
+from estimation_nodes.nodes.subscribers import missing_subscribers
 from estimation_nodes.params import topics
 from estimation_nodes.params.builders import build_commander_settings
 from estimation_nodes.params.specs import COMMANDER_SPECS
@@ -53,13 +55,17 @@ class MotionCommander(Node):
             self._messages = [Int32(data=command) for command in settings.commands]
             self._publisher = self.create_publisher(Int32, topics.MOTION_CMD, INPUT_QOS)
         self._limit = settings.limit
+        self._required_nodes = settings.required_nodes
         self._values = values
         self._sent = 0
         self._ready_since: float | None = None
         self._timer = self.create_timer(POLL_PERIOD_S, self._wait_for_graph)
         required = values["required_subscribers"]
+        named = f" ({', '.join(self._required_nodes)} among them)" if self._required_nodes \
+            else ""
         self.get_logger().info(
-            f"waiting for {plural(required, 'subscriber')} on {self._publisher.topic_name}"
+            f"waiting for {plural(required, 'subscriber')}{named} on "
+            f"{self._publisher.topic_name}"
             if required else f"sending on {self._publisher.topic_name} without waiting for "
             f"subscribers")
 
@@ -73,8 +79,14 @@ class MotionCommander(Node):
         """Commands published so far."""
         return self._sent
 
-    def _wait_for_graph(self) -> None:
+    def _subscribers_ready(self) -> bool:
         if self._publisher.get_subscription_count() < self._values["required_subscribers"]:
+            return False
+        return not self._required_nodes or not missing_subscribers(
+            self, self._publisher, self._required_nodes)
+
+    def _wait_for_graph(self) -> None:
+        if not self._subscribers_ready():
             self._ready_since = None
             return
         now = time.monotonic()
@@ -92,7 +104,7 @@ class MotionCommander(Node):
         if self._limit is not None and self._sent >= self._limit:
             self._finish()
             return
-        if self._publisher.get_subscription_count() < self._values["required_subscribers"]:
+        if not self._subscribers_ready():
             self.get_logger().warning(f"a subscriber left {self._publisher.topic_name}: paused "
                                       "until it is back")
             self._timer.cancel()

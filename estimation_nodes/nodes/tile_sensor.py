@@ -49,8 +49,10 @@ class TileSensor(Node):
         qos = latched_qos(100)
         self._truth_pub = self.create_publisher(Int64, topics.TRUE_POSITION, qos)
         hold = bool(values["hold_until_matched"])
-        self._tile_pub = HeldPublisher(self, String, topics.TILE_OBSERVATION, hold)
-        self._measurement_pub = HeldPublisher(self, Float64, topics.POSITION_MEASUREMENT, hold)
+        hold_for = values["hold_for_nodes"]
+        self._tile_pub = HeldPublisher(self, String, topics.TILE_OBSERVATION, hold, hold_for)
+        self._measurement_pub = HeldPublisher(self, Float64, topics.POSITION_MEASUREMENT, hold,
+                                              hold_for)
         self.create_subscription(Int32, topics.MOTION_CMD, self._on_motion_cmd, INPUT_QOS)
         mode = "scripted" if self._scripted else f"random (seed {seed})"
         self.get_logger().info(f"ready: {self._model.size} cells, start cell "

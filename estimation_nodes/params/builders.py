@@ -405,6 +405,8 @@ class CommanderSettings:
     limit: int | None
     #: When given, the sequence is these input vectors (kalman_input) instead of commands.
     vectors: tuple[tuple[float, ...], ...] = ()
+    #: Nodes that must be matched subscribers before a command goes out.
+    required_nodes: tuple[str, ...] = ()
 
     @property
     def length(self) -> int:
@@ -431,7 +433,22 @@ def build_commander_settings(values: Mapping[str, Any]) -> CommanderSettings:
     limit = values["max_commands"] or None
     if not values["repeat"]:
         limit = min(limit or length, length)
-    return CommanderSettings(commands, limit, vectors)
+    return CommanderSettings(commands, limit, vectors, _required_nodes(values, bool(vectors)))
+
+
+#: Who must hear the commander, unless told: the estimator and the simulator it drives.
+DEFAULT_REQUIRED_NODES = {False: ("estimator", "tile_sensor"),
+                          True: ("estimator", "linear_system")}
+
+
+def _required_nodes(values: Mapping[str, Any], vectors: bool) -> tuple[str, ...]:
+    if not values["required_subscribers"]:
+        return ()
+    given = values.get("required_nodes", UNSET)
+    if given is UNSET:
+        return DEFAULT_REQUIRED_NODES[vectors]
+    names = tuple(str(name).strip() for name in given)
+    return tuple(name for name in names if name)
 
 
 def _input_vectors(values: Mapping[str, Any]) -> tuple[tuple[float, ...], ...]:
@@ -462,3 +479,14 @@ def build_linear_system_settings(values: Mapping[str, Any]) -> LinearSystemSetti
         raise ValueError(f"true_initial_state: expected {model.state_size} values (n), "
                          f"got {state.size}")
     return LinearSystemSettings(model, state)
+
+
+#: Bytes one reorder-history entry costs besides its saved belief and Kalman state.
+REORDER_ENTRY_OVERHEAD = 512
+
+
+def reorder_max_events(memory_mb: float, cells: int, state_size: int) -> int:
+    """How many events the reorder history may keep within ``memory_mb``: each saves one
+    belief (cells doubles) and one Kalman state (x and P)."""
+    per_event = 8 * (cells + state_size + state_size * state_size) + REORDER_ENTRY_OVERHEAD
+    return max(1, int(memory_mb * 2**20) // per_event)

@@ -118,6 +118,17 @@ ESTIMATOR_SPECS = WORLD_SPECS + MATRIX_SPECS + (
               "default: a step through DDS at 1e6 cells is dominated by moving the two "
               "belief messages, so the node's end-to-end rate does not change measurably.",
               read_only=True),
+    ParamSpec("reorder_horizon", 10.0,
+              "Seconds of past events kept so that a late one (a reading that arrived before "
+              "the move that caused it, a backlog after a network outage) is applied in the "
+              "order the events happened, by their source timestamps, and the events after "
+              "it again, republishing their estimates. 0: apply in arrival order.",
+              read_only=True, min_value=0.0, max_value=3600.0),
+    ParamSpec("reorder_memory_mb", 256.0,
+              "Most memory the saved states of the reorder history may take (one belief and "
+              "one Kalman state per event): on a large world it bounds how many events are "
+              "kept, below reorder_horizon.", read_only=True, min_value=1.0,
+              max_value=65536.0),
 )
 
 
@@ -125,6 +136,14 @@ def spec_defaults(specs: tuple[ParamSpec, ...]) -> dict[str, Any]:
     """Every parameter's default, by name (UNSET for those without one)."""
     return {spec.name: spec.default for spec in specs}
 
+
+#: The simulators' readings wait for these subscribers (hold_until_matched).
+HOLD_FOR_NODES = ParamSpec(
+    "hold_for_nodes", ["estimator"],
+    "Nodes (names relative to this node's namespace, or absolute) whose subscriptions must be "
+    "matched before a reading goes out, with hold_until_matched: a recorder or `ros2 topic "
+    "echo` that matches first does not let readings go out that the estimator would miss.",
+    read_only=True)
 
 SENSOR_SPECS = WORLD_SPECS + (
     ParamSpec("initial_cell", 0, "True starting cell of the robot (index, 0-based).",
@@ -141,9 +160,11 @@ SENSOR_SPECS = WORLD_SPECS + (
               "Scripted mode: position measurements to publish, one per command.",
               read_only=True, type_name="double_array"),
     ParamSpec("hold_until_matched", True,
-              "Keep readings (up to 1000 per topic) while no subscriber is matched on their "
-              "topic and send them, in order, once one is: a sensor (re)started before the "
-              "estimator has discovered it loses nothing.", read_only=True),
+              "Keep readings (up to 1000 per topic) until the nodes of hold_for_nodes (any "
+              "subscriber, if it is empty) are matched on their topic and send them, in "
+              "order, then: a sensor (re)started before the estimator has discovered it loses "
+              "nothing.", read_only=True),
+    HOLD_FOR_NODES,
 )
 
 COMMANDER_SPECS = (
@@ -162,7 +183,14 @@ COMMANDER_SPECS = (
     ParamSpec("max_commands", 0, "Stop after this many commands in all (0: no limit).",
               read_only=True, min_value=0, max_value=2**31 - 1),
     ParamSpec("required_subscribers", 2, "Matched subscriptions on motion_cmd to wait for "
-              "before the first command.", read_only=True, min_value=0, max_value=1000),
+              "before the first command (0: send without waiting for anyone).",
+              read_only=True, min_value=0, max_value=1000),
+    ParamSpec("required_nodes", UNSET,
+              "Nodes (names relative to this node's namespace, or absolute) that must be "
+              "matched subscribers before a command goes out, beside required_subscribers; "
+              "unset: estimator and tile_sensor (estimator and linear_system with "
+              "input_vectors). A recorder or `ros2 topic echo` counts as a subscriber but "
+              "never stands in for one of these.", read_only=True, type_name="string_array"),
     ParamSpec("start_delay", 1.0, "Seconds to wait after the subscribers are there, so the "
               "rest of the graph can discover itself.", read_only=True,
               min_value=0.0, max_value=3600.0),
@@ -178,8 +206,9 @@ LINEAR_SYSTEM_SPECS = tuple(replace(spec, read_only=True) for spec in MATRIX_SPE
     ParamSpec("seed", -1, "Seed of the process and measurement noise; -1 draws one from the "
               "operating system.", read_only=True),
     ParamSpec("hold_until_matched", True,
-              "Keep measurements (up to 1000) while no subscriber is matched on "
-              "kalman_measurement and send them, in order, once one is.", read_only=True),
+              "Keep measurements (up to 1000) until the nodes of hold_for_nodes are matched "
+              "on kalman_measurement and send them, in order, then.", read_only=True),
+    HOLD_FOR_NODES,
 )
 
 #: Where a Foxglove live view listens unless told: this machine only, Foxglove's usual port.

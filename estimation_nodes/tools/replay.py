@@ -9,10 +9,13 @@ estimate is compared with the estimate recorded online, in order, topic by
 topic. Exit 0 when all agree to the tolerance, 1 otherwise, with each
 differing step shown; 2 when the recording cannot be read.
 
-Events of different topics reach the estimator in no guaranteed order, and
-it handles them as they arrive, so a run under heavy load can differ where
-a command reached it after the observation it caused; at the demo's rates
-they do not.
+The estimator applies events in the order they were published too, whatever
+order they reached it in: when an event arrives late it goes back, applies
+it and republishes the estimates after it. The estimates it published
+before that were provisional; they are superseded, and reported as such. The
+comparison takes, for each offline estimate, the online one that settled it:
+every offline estimate must be matched, in order, and every superseded one
+must be followed by the estimates that replace it.
 """
 
 from __future__ import annotations
@@ -40,25 +43,84 @@ class Comparison:
     compared: dict[str, int] = field(default_factory=dict)
     differences: list[str] = field(default_factory=list)
     worst: dict[str, float] = field(default_factory=dict)
+    #: Online estimates superseded by a republication after a late event, per topic.
+    superseded: dict[str, int] = field(default_factory=dict)
 
     @property
     def equal(self) -> bool:
         return not self.differences
 
-    def check(self, topic: str, index: int, online, offline, tolerance: float) -> None:
-        self.compared[topic] = self.compared.get(topic, 0) + 1
-        if online is None:
-            self.differences.append(f"{topic} #{index + 1}: computed offline, not recorded")
-            return
-        online, offline = np.asarray(online, float), np.asarray(offline, float)
-        error = float(np.max(np.abs(online - offline))) if online.shape == offline.shape \
-            else float("inf")
-        self.worst[topic] = max(self.worst.get(topic, 0.0), error)
-        if not error <= tolerance:
+    def compare(self, topic: str, online: list, offline: list, tolerance: float) -> None:
+        """Match ``offline`` (the estimates in causal order) with what was published."""
+        alignment = align(online, offline, tolerance)
+        self.compared[topic] = len(offline)
+        self.superseded[topic] = len(alignment.superseded)
+        self.worst[topic] = alignment.worst
+        matched = alignment.matched
+        if matched < len(offline):
+            self.differences.append(_missing(topic, matched, online, offline[matched]))
+        unreplaced = [i for i in alignment.superseded if i > alignment.last_match]
+        if unreplaced:
             self.differences.append(
-                f"{topic} #{index + 1}: |online - offline| = {error:.3g}\n"
-                f"    online  {np.array2string(online, precision=9, threshold=12)}\n"
-                f"    offline {np.array2string(offline, precision=9, threshold=12)}")
+                f"{topic}: {plural(len(unreplaced), 'online estimate')} after the last one "
+                f"that equals the offline filter (first: online #{unreplaced[0] + 1})")
+
+
+@dataclass(frozen=True)
+class Alignment:
+    """How published estimates line up with the offline ones (see ``align``)."""
+
+    #: How many offline estimates, from the first, found their online estimate.
+    matched: int
+    #: Indices of online estimates that equal no offline one in their place.
+    superseded: list[int]
+    #: Index of the last online estimate that matched (-1: none).
+    last_match: int
+    #: Largest difference of a matched pair.
+    worst: float
+    #: For each matched offline estimate, the index of the online one that settled it.
+    settled: list[int]
+
+
+def align(online: list, offline: list, tolerance: float) -> Alignment:
+    """Walk the online estimates: each equals the next offline one, or an earlier one (the
+    estimator went back after a late event and publishes those steps again), or none
+    (a provisional estimate, superseded by what follows)."""
+    offline_arrays = [np.asarray(value, float) for value in offline]
+    expected, last_match, worst = 0, -1, 0.0
+    superseded: list[int] = []
+    settled: list[int] = []
+    for index, value in enumerate(online):
+        value = np.asarray(value, float)
+        candidates = ([expected] if expected < len(offline_arrays) else []) + \
+            list(range(expected - 1, -1, -1))
+        for step in candidates:
+            error = _difference(value, offline_arrays[step])
+            if error <= tolerance:
+                worst = max(worst, error)
+                expected, last_match = step + 1, index
+                settled[step:] = [index]
+                break
+        else:
+            superseded.append(index)
+    return Alignment(expected, superseded, last_match, worst, settled)
+
+
+def _difference(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.max(np.abs(a - b), initial=0.0)) if a.shape == b.shape else float("inf")
+
+
+def _missing(topic: str, step: int, online: list, offline) -> str:
+    """Why offline estimate ``step`` found no online one: the closest shown beside it."""
+    if not online:
+        return f"{topic} #{step + 1}: computed offline, not recorded"
+    target = np.asarray(offline, float)
+    error, closest = min(((_difference(np.asarray(v, float), target), np.asarray(v, float))
+                          for v in online), key=lambda item: item[0])
+    return (f"{topic} #{step + 1}: |online - offline| = {error:.3g} (the closest online "
+            f"estimate)\n"
+            f"    online  {np.array2string(closest, precision=9, threshold=12)}\n"
+            f"    offline {np.array2string(target, precision=9, threshold=12)}")
 
 
 def estimator_values(parameters_yaml: str, node: str = "/estimator") -> dict:
@@ -76,10 +138,6 @@ def estimator_name(recording: Recording) -> str:
         if base == topics.BELIEF:
             return f"{namespace}/estimator"
     return "/estimator"
-
-
-def _at(sequence: list, index: int):
-    return sequence[index] if index < len(sequence) else None
 
 
 def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comparison:
@@ -100,14 +158,12 @@ def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comp
         topics.KALMAN_STATE_PREDICTED: [_flat(*state) for state in run.states_predicted],
         topics.KALMAN_STATE: [_flat(*state) for state in run.states],
     }
-    counts = {output: 0 for output in recorded}
+    computed: dict[str, list] = {output: [] for output in recorded}
     # The component kalman_estimate shows as its x (the 1-D filter's position).
     shown = settings.kalman.pose_components[0]
 
     def check(output: str, offline) -> None:
-        index = counts[output]
-        counts[output] += 1
-        comparison.check(output, index, _at(recorded[output], index), offline, tolerance)
+        computed[output].append(np.array(offline, float))
 
     def kalman_step(predicted: bool, value) -> None:
         # As the estimator: a step it rejected published nothing, so nothing to compare.
@@ -140,9 +196,7 @@ def replay(recording: Recording, parameters_yaml: str, tolerance: float) -> Comp
         else:
             kalman_step(False, value)
     for output, online in recorded.items():
-        for index in range(counts[output], len(online)):
-            comparison.differences.append(
-                f"{output} #{index + 1}: recorded online, no input to compute it offline")
+        comparison.compare(output, online, computed[output], tolerance)
     return comparison
 
 
@@ -171,8 +225,11 @@ def main(argv: list[str] | None = None) -> None:
     for topic, count in sorted(recording.counts.items()):
         print(f"  {topic}: {plural(count, 'message')}")
     for topic, count in comparison.compared.items():
+        superseded = comparison.superseded.get(topic, 0)
         print(f"{topic}: {count} estimates compared, largest difference "
-              f"{comparison.worst.get(topic, float('nan')):.3g}")
+              f"{comparison.worst.get(topic, float('nan')):.3g}"
+              + (f"; {superseded} provisional, superseded after a late event"
+                 if superseded else ""))
     for line in comparison.differences:
         print(line)
     verdict = "EQUAL" if comparison.equal else f"DIFFERENT ({len(comparison.differences)})"

@@ -20,7 +20,7 @@ def params(**values):
 def test_commander_waits_for_subscribers_then_sends_the_sequence(context, executor):
     commander = MotionCommander(context=context, parameter_overrides=params(
         commands=[2, -1], repeat=True, max_commands=5, rate_hz=50.0, required_subscribers=1,
-        start_delay=0.0))
+        required_nodes=["motion_commander"], start_delay=0.0))
     executor.add_node(commander)
     try:
         # Nobody listens: nothing may be sent, however long it spins.
@@ -43,7 +43,8 @@ def test_commander_without_commands_is_a_configuration_error(context):
 
 
 def sensor_outputs(context, executor, collector_factory, overrides, commands):
-    sensor = TileSensor(context=context, parameter_overrides=params(**overrides))
+    sensor = TileSensor(context=context, parameter_overrides=params(
+        hold_for_nodes=["test_collector"], **overrides))
     executor.add_node(sensor)
     out = collector_factory({"tile_observation": (String, INPUT_QOS),
                              "position_measurement": (Float64, INPUT_QOS),
@@ -89,7 +90,7 @@ def test_sensor_rejects_unknown_scripted_class(context):
 
 def test_sensor_holds_readings_until_someone_listens(context, executor, collector_factory):
     sensor = TileSensor(context=context, parameter_overrides=params(
-        scripted_observations=["bright", "dark", "dark"]))
+        scripted_observations=["bright", "dark", "dark"], hold_for_nodes=["late"]))
     executor.add_node(sensor)
     driver = collector_factory({"true_position": Int64}, name="driver")
     pub = driver.node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
@@ -103,3 +104,48 @@ def test_sensor_holds_readings_until_someone_listens(context, executor, collecto
     assert [m.data for m in late.messages["tile_observation"]] == ["bright", "dark", "dark"]
     assert sensor._tile_pub.held == 0
     sensor.destroy_node()
+
+
+def test_sensor_holds_readings_for_the_estimator_not_for_a_recorder(context, executor,
+                                                                   collector_factory):
+    """A recorder that matches first does not let readings out that the estimator would
+    miss: they wait for a subscriber named as in hold_for_nodes (estimator by default)."""
+    sensor = TileSensor(context=context, parameter_overrides=params(
+        scripted_observations=["bright", "dark", "dark"]))
+    executor.add_node(sensor)
+    recorder = collector_factory({"tile_observation": (String, INPUT_QOS),
+                                  "true_position": Int64}, name="recorder")
+    pub = recorder.node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+    assert spin_until(executor, lambda: pub.get_subscription_count() == 1
+                      and sensor._tile_pub._publisher.get_subscription_count() == 1, 10.0)
+    for _ in range(3):
+        pub.publish(Int32(data=1))
+    assert spin_until(executor, lambda: recorder.count("true_position") == 3, 10.0)
+    spin_until(executor, lambda: False, 0.3)
+    assert recorder.count("tile_observation") == 0 and sensor._tile_pub.held == 3
+    estimator = collector_factory({"tile_observation": (String, INPUT_QOS)}, name="estimator")
+    assert spin_until(executor, lambda: estimator.count("tile_observation") == 3, 10.0)
+    assert spin_until(executor, lambda: recorder.count("tile_observation") == 3, 10.0)
+    assert [m.data for m in estimator.messages["tile_observation"]] == ["bright", "dark", "dark"]
+    assert [m.data for m in recorder.messages["tile_observation"]] == ["bright", "dark", "dark"]
+    assert sensor._tile_pub.held == 0
+    sensor.destroy_node()
+
+
+def test_commander_waits_for_its_required_nodes_not_for_any_subscriber(context, executor,
+                                                                      collector_factory):
+    commander = MotionCommander(context=context, parameter_overrides=params(
+        commands=[1], max_commands=1, rate_hz=50.0, required_subscribers=1, start_delay=0.0))
+    executor.add_node(commander)
+    try:
+        recorder = collector_factory({"motion_cmd": (Int32, INPUT_QOS)}, name="recorder")
+        spin_until(executor, lambda: False, 0.5)
+        assert commander.sent == 0            # the default: estimator and tile_sensor
+        collector_factory({"motion_cmd": (Int32, INPUT_QOS)}, name="estimator")
+        spin_until(executor, lambda: False, 0.5)
+        assert commander.sent == 0
+        sensor = collector_factory({"motion_cmd": (Int32, INPUT_QOS)}, name="tile_sensor")
+        assert spin_until(executor, lambda: sensor.count("motion_cmd") == 1
+                          and recorder.count("motion_cmd") == 1, 10.0)
+    finally:
+        commander.destroy_node()

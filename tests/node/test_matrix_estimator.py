@@ -165,10 +165,12 @@ def test_commander_and_simulated_system_close_the_loop(context, executor, collec
     params = [Parameter(k, value=v) for k, v in TRACKING.items() if k != "kalman.mode"
               and k != "kalman.pose_components"]
     system = LinearSystem(context=context, parameter_overrides=[
-        *params, Parameter("seed", value=5)])
+        *params, Parameter("seed", value=5),
+        Parameter("hold_for_nodes", value=["test_collector"])])
     commander = MotionCommander(context=context, parameter_overrides=[
         Parameter("input_vectors", value=[0.5, 0.0, 0.0, 0.5]),
         Parameter("input_size", value=2), Parameter("required_subscribers", value=2),
+        Parameter("required_nodes", value=["linear_system"]),
         Parameter("start_delay", value=0.0), Parameter("rate_hz", value=20.0)])
     seen = collector_factory({"kalman_input": (Float64MultiArray, INPUT_QOS),
                               "kalman_measurement": (Float64MultiArray, INPUT_QOS),
