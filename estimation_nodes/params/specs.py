@@ -124,7 +124,7 @@ ESTIMATOR_SPECS = WORLD_SPECS + MATRIX_SPECS + (
               "order the events happened, by their source timestamps, and the events after "
               "it again, republishing their estimates. 0: apply in arrival order.",
               read_only=True, min_value=0.0, max_value=3600.0),
-    ParamSpec("reorder_memory_mb", 256.0,
+    ParamSpec("reorder_memory_mb", 64.0,
               "Most memory the saved states of the reorder history may take (one belief and "
               "one Kalman state per event): on a large world it bounds how many events are "
               "kept, below reorder_horizon.", read_only=True, min_value=1.0,
