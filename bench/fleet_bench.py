@@ -1,4 +1,4 @@
-"""How many robots one machine carries: K namespaces, each its estimator, tile sensor and commander.
+"""How many robots one machine carries: K namespaces, each its estimator, sensor and commander.
 
     python bench/fleet_bench.py [--robots 1 2 4 8 16] [--late-ms 250]
 
