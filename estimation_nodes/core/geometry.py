@@ -17,3 +17,8 @@ def quaternion_from_rpy(
             cr * sp * cy + sr * cp * sy,
             cr * cp * sy - sr * sp * cy,
             cr * cp * cy + sr * sp * sy)
+
+
+def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:
+    """The rotation about z of a quaternion (REP 103), for planar poses."""
+    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

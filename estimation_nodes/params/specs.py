@@ -223,6 +223,92 @@ FOXGLOVE_VIEW_SPECS = (
               "port, logged at start).", read_only=True, min_value=0, max_value=65535),
 )
 
+#: The likelihood field and the odometry noise, shared by the localizer and the simulated
+#: robot: the simulator draws its noise from the model the localizer assumes.
+GRID_MODEL_SPECS = (
+    ParamSpec("map_file", "", "A map in map_server's format (YAML with image, resolution, "
+              "origin, negate, occupied_thresh, free_thresh, mode); empty: the localizer "
+              "takes the map from the map topic.", read_only=True),
+    ParamSpec("laser_z_hit", 0.5, "Weight of the Gaussian around the nearest obstacle in the "
+              "likelihood field (AMCL's laser_z_hit).", read_only=True, min_value=0.0,
+              max_value=1.0),
+    ParamSpec("laser_z_rand", 0.5, "Weight of random readings, uniform over the range "
+              "(AMCL's laser_z_rand); must be > 0 so no scan rules out every state.",
+              read_only=True, min_value=1e-6, max_value=1.0),
+    ParamSpec("laser_sigma_hit", 0.2, "Std (m) of a reading around the nearest obstacle.",
+              read_only=True, min_value=0.001, max_value=10.0),
+    ParamSpec("laser_max_range", 12.0, "Readings at or beyond this (m) are no return.",
+              read_only=True, min_value=0.1, max_value=1000.0),
+    ParamSpec("laser_likelihood_max_dist", 2.0, "Distances to obstacles are capped at this "
+              "(m) in the likelihood field.", read_only=True, min_value=0.01, max_value=100.0),
+    ParamSpec("alpha1", 0.2, "Rotation noise from rotation (AMCL's alpha1).", read_only=True,
+              min_value=0.0, max_value=10.0),
+    ParamSpec("alpha2", 0.2, "Rotation noise from translation (rad per m).", read_only=True,
+              min_value=0.0, max_value=10.0),
+    ParamSpec("alpha3", 0.2, "Translation noise from translation.", read_only=True,
+              min_value=0.0, max_value=10.0),
+    ParamSpec("alpha4", 0.2, "Translation noise from rotation (m per rad).", read_only=True,
+              min_value=0.0, max_value=10.0),
+)
+
+GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
+    ParamSpec("resolution", 0.1, "Size (m) of a state cell: a whole multiple of the map's "
+              "resolution; the map is reduced to it.", read_only=True, min_value=0.001,
+              max_value=100.0),
+    ParamSpec("heading_bins", 72, "Heading bins of the state grid (72: 5 degrees).",
+              read_only=True, min_value=1, max_value=3600),
+    ParamSpec("max_states", 5_000_000, "A map with more states (cells x headings) is refused.",
+              read_only=True, min_value=1, max_value=200_000_000),
+    ParamSpec("max_beams", 60, "Beams of a scan used, evenly chosen among the valid ones.",
+              read_only=True, min_value=1, max_value=10000),
+    ParamSpec("update_min_d", 0.25, "Translation (m) that triggers a filter update.",
+              read_only=True, min_value=0.0, max_value=100.0),
+    ParamSpec("update_min_a", 0.2, "Rotation (rad) that triggers a filter update.",
+              read_only=True, min_value=0.0, max_value=10.0),
+    ParamSpec("max_odom_jump", 1.0, "An odometry step longer than this (m) is a jump: "
+              "dropped, counted, and the odometry followed from the new pose.",
+              read_only=True, min_value=0.01, max_value=1000.0),
+    ParamSpec("quality_radius", 0.3, "localization_quality: the belief's probability within "
+              "this distance (m) of the published pose ...", read_only=True, min_value=0.0,
+              max_value=100.0),
+    ParamSpec("quality_angle", 10.0, "... and this heading difference (degrees).",
+              read_only=True, min_value=0.0, max_value=180.0),
+    ParamSpec("frame_id", "map", "Frame of the published pose and belief map."),
+    ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics messages.",
+              read_only=True, min_value=0.01, max_value=3600.0),
+)
+
+PLANAR_ROBOT_SPECS = GRID_MODEL_SPECS + (
+    ParamSpec("seed", -1, "Seed of the route, the odometry and the scan noise; -1 draws "
+              "one from the operating system.", read_only=True),
+    ParamSpec("rate_hz", 10.0, "Simulation steps (odometry and scans) per second.",
+              read_only=True, min_value=0.1, max_value=1000.0),
+    ParamSpec("speed", 0.5, "Forward speed (m/s) when wandering.", read_only=True,
+              min_value=0.0, max_value=10.0),
+    ParamSpec("turn_rate", 1.0, "Rotation speed (rad/s) when turning away from an obstacle.",
+              read_only=True, min_value=0.01, max_value=20.0),
+    ParamSpec("robot_radius", 0.25, "The robot keeps this far (m) from every obstacle.",
+              read_only=True, min_value=0.0, max_value=10.0),
+    ParamSpec("beams", 180, "Beams of the simulated scan, over a full turn.", read_only=True,
+              min_value=1, max_value=10000),
+    ParamSpec("scan_noise_std", 0.05, "Std (m) of the Gaussian noise on each simulated range "
+              "(the likelihood field's hit model; the localizer's laser_sigma_hit is wider, as "
+              "AMCL's is, to be robust).", read_only=True, min_value=0.0, max_value=10.0),
+    ParamSpec("scan_random_fraction", 0.05, "Fraction of simulated readings that are random, "
+              "uniform over the range (the likelihood field's z_rand part).", read_only=True,
+              min_value=0.0, max_value=1.0),
+    ParamSpec("initial_pose", UNSET, "[x, y, yaw] where the robot starts; unset: a free place "
+              "drawn from the seed.", read_only=True, type_name="double_array"),
+    ParamSpec("duration", 0.0, "Stop after this many seconds of simulated motion (0: never); "
+              "with exit_when_done the process ends then.", read_only=True, min_value=0.0,
+              max_value=1e6),
+    ParamSpec("exit_when_done", False, "End the process when duration is over.",
+              read_only=True),
+    ParamSpec("kidnap_after", 0.0, "Teleport the robot to another free place after this many "
+              "seconds (0: never), to see the localizer lose and find it again.",
+              read_only=True, min_value=0.0, max_value=1e6),
+)
+
 #: Each node's parameters, by node name.
 NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "estimator": ESTIMATOR_SPECS,
@@ -230,4 +316,6 @@ NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "motion_commander": COMMANDER_SPECS,
     "linear_system": LINEAR_SYSTEM_SPECS,
     "foxglove_view": FOXGLOVE_VIEW_SPECS,
+    "grid_localizer": GRID_LOCALIZER_SPECS,
+    "planar_robot": PLANAR_ROBOT_SPECS,
 }

@@ -1,0 +1,106 @@
+"""The running grid localization: belief, odometry reference, and the update rule.
+
+As AMCL: odometry is followed continuously, and a scan updates the filter
+(a prediction with the motion since the last update, then the correction)
+only once the robot moved ``update_min_d`` or turned ``update_min_a`` since
+then; the first scan corrects at once. An odometry step longer than
+``max_odom_jump`` is a jump (a reset odometry, a teleport): it is not taken
+as motion, and odometry is followed from the new pose. A step that fails
+(a scan every state rules out) leaves everything as it was.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimation_nodes.core import grid
+from estimation_nodes.core.models import FloatArray
+
+Pose = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """What the localizer publishes: the most likely pose, the belief's covariance
+    around it, and the probability near it."""
+
+    pose: Pose
+    covariance: FloatArray
+    quality: float
+
+
+class GridLocalization:
+    """Grid Markov localization of one robot on one map."""
+
+    def __init__(self, model: grid.GridModel, noise: grid.OdometryNoise, update_min_d: float,
+                 update_min_a: float, max_odom_jump: float) -> None:
+        self.model = model
+        self.noise = noise
+        self._min_d, self._min_a, self._max_jump = update_min_d, update_min_a, max_odom_jump
+        self.belief: FloatArray = grid.uniform_over_free(model)
+        self.log_evidence = float("nan")
+        #: The odometry pose at the last update (None: no update yet) and the latest one.
+        self._reference: Pose | None = None
+        self._latest: Pose | None = None
+        self.updates = 0
+
+    def global_localization(self) -> None:
+        """Not knowing where the robot is: uniform over the free cells."""
+        self.belief = grid.uniform_over_free(self.model)
+        self.log_evidence = float("nan")
+
+    def set_prior(self, pose: Pose, covariance: FloatArray) -> None:
+        """A Gaussian prior (RViz's "2D Pose Estimate")."""
+        self.belief = grid.gaussian_prior(self.model, *pose, covariance)
+
+    def on_odometry(self, pose: Pose) -> bool:
+        """Follow odometry; False when the step was a jump (not taken as motion)."""
+        latest = self._latest
+        self._latest = pose
+        if latest is not None and math.hypot(pose[0] - latest[0],
+                                             pose[1] - latest[1]) > self._max_jump:
+            # What was moved before the jump is lost with it; follow on from here.
+            if self._reference is not None:
+                self._reference = pose
+            return False
+        return True
+
+    def due(self) -> bool:
+        """Whether the next scan updates the filter: the first once odometry is there,
+        later ones after enough motion."""
+        if self._latest is None:
+            return False
+        if self._reference is None:
+            return True
+        dx = self._latest[0] - self._reference[0]
+        dy = self._latest[1] - self._reference[1]
+        turned = abs(math.remainder(self._latest[2] - self._reference[2], 2 * math.pi))
+        return math.hypot(dx, dy) >= self._min_d or turned >= self._min_a
+
+    def update(self, ranges: FloatArray, angles: FloatArray) -> None:
+        """Predict with the odometry since the last update, correct with the scan."""
+        if self._latest is None:
+            raise ValueError("no odometry yet: the motion since the last update is unknown")
+        belief = self.belief
+        if self._reference is not None:
+            delta = grid.odometry_delta(self._reference, self._latest)
+            belief = grid.predict(belief, self.model, delta, self.noise)
+        log_likelihood = grid.scan_log_likelihood(self.model, ranges, angles)
+        self.belief, self.log_evidence = grid.correct(belief, log_likelihood)
+        self._reference = self._latest
+        self.updates += 1
+
+    def estimate(self, radius: float, angle: float) -> Estimate:
+        state = grid.most_likely_state(self.belief)
+        pose = grid.pose_of(self.model, state)
+        return Estimate(pose, grid.covariance_around(self.belief, self.model, pose),
+                        grid.mass_near(self.belief, self.model, pose, radius, angle))
+
+    def belief_map(self) -> np.ndarray:
+        return grid.belief_map(self.belief)
+
+    def entropy_bits(self) -> float:
+        return grid.entropy_bits(self.belief)

@@ -1,0 +1,245 @@
+"""grid_localizer: grid Markov localization on a map, with OccupancyGrid, LaserScan and Odometry.
+
+The belief over (x, y, heading) starts uniform over the free cells: the
+robot need not be told where it is. ``odom`` is followed continuously; a
+``scan`` updates the belief once the robot moved ``update_min_d`` or turned
+``update_min_a`` since the last update (core/grid_state.py). After each
+update: ``pose`` (the most likely state, with the belief's covariance around
+it), ``belief_map`` (the belief's maximum over headings, 0..100, on the
+state grid: RViz's Map display and Foxglove's 3D panel draw it) and
+``localization_quality`` (the belief's probability near that pose). Bad
+messages are dropped and counted, never a NaN belief.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections import Counter
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import OccupancyGrid, Odometry
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data
+from rclpy.time import Time
+from sensor_msgs.msg import LaserScan
+from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
+
+from estimation_nodes.core import grid
+from estimation_nodes.core.grid_state import GridLocalization
+from estimation_nodes.nodes.grid_messages import (
+    covariance_3x3,
+    finite_pose,
+    occupancy_grid,
+    planar_pose,
+    pose_with_covariance,
+    scan_beams,
+)
+from estimation_nodes.nodes.parameters import declare_and_build
+from estimation_nodes.nodes.process import main_for
+from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.params.maps import (
+    MapError,
+    build_grid_localizer_settings,
+    occupancy_from_message,
+)
+from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS
+
+WARN_THROTTLE_S = 5.0
+
+
+class GridLocalizer(Node):
+    """Where the robot is on the map, as an exact grid belief."""
+
+    node_name = "grid_localizer"
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(self.node_name, **kwargs)
+        self._values, self._settings = declare_and_build(
+            self, GRID_LOCALIZER_SPECS, build_grid_localizer_settings)
+        self.handled: Counter[str] = Counter()
+        self.rejected: Counter[str] = Counter()
+        self._last_warning: dict[str, float] = {}
+        self.localization: GridLocalization | None = None
+        self.last_update_s = float("nan")
+        latched = latched_qos(1)
+        self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, "pose", latched)
+        self._belief_pub = self.create_publisher(OccupancyGrid, "belief_map", latched)
+        self._quality_pub = self.create_publisher(Float64, "localization_quality", latched)
+        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._pose_msg = PoseWithCovarianceStamped()
+        if self._settings.model is not None:
+            self._start(self._settings.model)
+        else:
+            self.create_subscription(OccupancyGrid, "map", self._on_map, latched)
+        # Best effort takes both best-effort and reliable publishers; a scan is only worth
+        # its latest, while odometry is followed in order.
+        self.create_subscription(LaserScan, "scan", self._on_scan, qos_profile_sensor_data)
+        self.create_subscription(Odometry, "odom", self._on_odom, 50)
+        self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose,
+                                 10)
+        self.create_service(Trigger, "~/global_localization", self._on_global_localization)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self.create_timer(self._values["diagnostics_period"], self._publish_diagnostics)
+
+    def _start(self, model: grid.GridModel) -> None:
+        self.localization = GridLocalization(
+            model, self._settings.noise, self._values["update_min_d"],
+            self._values["update_min_a"], self._values["max_odom_jump"])
+        rows, cols = model.free.shape
+        self.get_logger().info(
+            f"ready: {cols} x {rows} cells of {model.resolution} m, {model.heading_bins} "
+            f"headings ({model.free.sum() * model.heading_bins} free states); belief uniform "
+            f"over the free cells")
+        self._publish()
+
+    # --- inputs -----------------------------------------------------------------------------
+
+    def _on_map(self, msg: OccupancyGrid) -> None:
+        info = msg.info
+        origin = (info.origin.position.x, info.origin.position.y,
+                  planar_pose(info.origin)[2])
+        try:
+            occupancy = occupancy_from_message(info.width, info.height, info.resolution,
+                                               origin, msg.data)
+            model = self._settings.model_for(occupancy)
+        except MapError as error:
+            self._reject("bad_map", f"map dropped: {error}")
+            return
+        self.handled["map"] += 1
+        self._start(model)
+
+    def _on_odom(self, msg: Odometry) -> None:
+        pose = planar_pose(msg.pose.pose)
+        if not finite_pose(pose):
+            self._reject("non_finite_odom", "odom dropped: its pose is not finite")
+            return
+        if self.localization is None:
+            return
+        if not self.localization.on_odometry(pose):
+            self._reject("odom_jump", f"odom jumped more than {self._values['max_odom_jump']} m:"
+                         " not taken as motion; followed from the new pose")
+            return
+        self.handled["odom"] += 1
+
+    def _on_scan(self, msg: LaserScan) -> None:
+        if self.localization is None:
+            return
+        if not (math.isfinite(msg.angle_increment) and msg.angle_increment != 0
+                and math.isfinite(msg.angle_min)):
+            self._reject("bad_scan", f"scan dropped: angle_increment {msg.angle_increment}, "
+                         f"angle_min {msg.angle_min}")
+            return
+        if not self.localization.due():
+            self.handled["scan_without_motion"] += 1
+            return
+        max_range = min(msg.range_max, self._settings.sensor.max_range) \
+            if math.isfinite(msg.range_max) and msg.range_max > 0 \
+            else self._settings.sensor.max_range
+        ranges, angles, nan = scan_beams(msg.ranges, msg.angle_min, msg.angle_increment,
+                                         msg.range_min, max_range, self._values["max_beams"])
+        if nan:
+            self.rejected["nan_ranges"] += nan
+        started = time.perf_counter()
+        try:
+            self.localization.update(ranges, angles)
+        except grid.ZeroEvidenceError as error:
+            self._reject("zero_evidence", f"scan dropped: {error}")
+            return
+        self.last_update_s = time.perf_counter() - started
+        self.handled["scan"] += 1
+        self._publish(Time.from_msg(msg.header.stamp))
+
+    def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        pose = planar_pose(msg.pose.pose)
+        covariance = covariance_3x3(msg.pose.covariance)
+        if not (finite_pose(pose) and np.isfinite(covariance).all()):
+            self._reject("bad_initialpose", "initialpose dropped: not finite")
+            return
+        if self.localization is None:
+            return
+        try:
+            self.localization.set_prior(pose, covariance)
+        except np.linalg.LinAlgError:
+            self._reject("bad_initialpose", "initialpose dropped: its covariance is singular")
+            return
+        self.handled["initialpose"] += 1
+        self.get_logger().info(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}, "
+                               f"{math.degrees(pose[2]):.0f} deg) taken as the prior")
+        self._publish()
+
+    def _on_global_localization(self, _request, response: Trigger.Response):
+        if self.localization is None:
+            response.success, response.message = False, "no map yet"
+            return response
+        self.localization.global_localization()
+        self._publish()
+        response.success = True
+        response.message = "belief uniform over the free cells"
+        return response
+
+    def _on_reset(self, request, response: Trigger.Response):
+        return self._on_global_localization(request, response)
+
+    # --- outputs ----------------------------------------------------------------------------
+
+    def _publish(self, stamp: Time | None = None) -> None:
+        assert self.localization is not None
+        model = self.localization.model
+        estimate = self.localization.estimate(self._values["quality_radius"],
+                                              math.radians(self._values["quality_angle"]))
+        stamp_msg = (stamp or self.get_clock().now()).to_msg()
+        msg = pose_with_covariance(self._pose_msg, estimate.pose, estimate.covariance)
+        msg.header.stamp = stamp_msg
+        msg.header.frame_id = self._values["frame_id"]
+        self._pose_pub.publish(msg)
+        self._quality_pub.publish(Float64(data=estimate.quality))
+        self._belief_pub.publish(occupancy_grid(self.localization.belief_map(),
+                                                model.resolution, model.origin,
+                                                self._values["frame_id"], stamp_msg))
+
+    def _reject(self, reason: str, message: str) -> None:
+        self.rejected[reason] += 1
+        now = time.monotonic()
+        if now - self._last_warning.get(reason, -math.inf) >= WARN_THROTTLE_S:
+            self._last_warning[reason] = now
+            self.get_logger().warning(f"{message} (rejected so far: {self.rejected[reason]})")
+
+    def _publish_diagnostics(self) -> None:
+        values: dict[str, Any] = {"map": "waiting for map" if self.localization is None
+                                  else "loaded"}
+        if self.localization is not None:
+            estimate = self.localization.estimate(self._values["quality_radius"],
+                                                  math.radians(self._values["quality_angle"]))
+            values.update({
+                "pose_x": f"{estimate.pose[0]:.3f}", "pose_y": f"{estimate.pose[1]:.3f}",
+                "pose_yaw_deg": f"{math.degrees(estimate.pose[2]):.1f}",
+                "quality": f"{estimate.quality:.4f}",
+                "belief_entropy_bits": f"{self.localization.entropy_bits():.4f}",
+                "updates": self.localization.updates,
+            })
+            if math.isfinite(self.localization.log_evidence):
+                values["last_log_evidence"] = f"{self.localization.log_evidence:.4f}"
+            if math.isfinite(self.last_update_s):
+                values["last_update_ms"] = f"{self.last_update_s * 1e3:.1f}"
+        values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
+        values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
+        status = DiagnosticStatus(
+            level=DiagnosticStatus.WARN if self.rejected else DiagnosticStatus.OK,
+            name=f"{self.get_name()}: grid localization",
+            message="messages rejected" if self.rejected else "ok",
+            hardware_id=self.get_fully_qualified_name(),
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diagnostics_pub.publish(array)
+
+
+main = main_for(GridLocalizer)
+
+if __name__ == "__main__":
+    main()

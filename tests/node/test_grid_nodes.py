@@ -1,0 +1,174 @@
+"""grid_localizer and planar_robot in-process: localization from no prior, bad input, services."""
+
+import math
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from nav_msgs.msg import OccupancyGrid, Odometry
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import LaserScan
+from std_msgs.msg import Float64
+from std_srvs.srv import Trigger
+
+from estimation_nodes.nodes.grid_localizer import GridLocalizer
+from estimation_nodes.nodes.grid_messages import fill_pose, planar_pose
+from estimation_nodes.nodes.parameters import ConfigurationError
+from estimation_nodes.nodes.planar_robot import PlanarRobot
+from estimation_nodes.nodes.qos import latched_qos
+from tests.conftest import REPO, spin_until
+
+CORRIDOR = str(REPO / "maps" / "corridor.yaml")
+
+
+def params(**values):
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+@pytest.fixture
+def nodes(context, executor):
+    made = []
+
+    def make(node_class, **values):
+        node = node_class(context=context, parameter_overrides=params(**values))
+        executor.add_node(node)
+        made.append(node)
+        return node
+
+    yield make
+    for node in made:
+        node.destroy_node()
+
+
+def test_the_localizer_finds_the_simulated_robot_without_an_initial_pose(nodes, executor,
+                                                                         collector_factory):
+    nodes(PlanarRobot, map_file=CORRIDOR, seed=3, rate_hz=20.0)
+    localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=36)
+    seen = collector_factory({"pose": PoseWithCovarianceStamped,
+                              "true_pose": (PoseStamped, latched_qos(1000)),
+                              "localization_quality": Float64,
+                              "belief_map": OccupancyGrid})
+    first_quality = []
+    seen.node.create_subscription(Float64, "localization_quality",
+                                  lambda m: first_quality.append(m.data), latched_qos(1))
+    assert spin_until(executor, lambda: localizer.localization is not None
+                      and localizer.localization.updates >= 15, 60.0)
+    # The truth when the last scan used was taken: the pose carries that scan's stamp.
+    last = seen.messages["pose"][-1]
+    truths = {(m.header.stamp.sec, m.header.stamp.nanosec): m for m in seen.messages["true_pose"]}
+    truth = planar_pose(truths[(last.header.stamp.sec, last.header.stamp.nanosec)].pose)
+    estimate = planar_pose(last.pose.pose)
+    assert math.hypot(estimate[0] - truth[0], estimate[1] - truth[1]) < 0.3
+    assert abs(math.remainder(estimate[2] - truth[2], 2 * math.pi)) < math.radians(10)
+    # Not sure at first (uniform over the corridor), sure at the end.
+    assert first_quality[0] < 0.01 and seen.messages["localization_quality"][-1].data > 0.9
+    grid = seen.messages["belief_map"][-1]
+    assert (grid.info.width, grid.info.height, round(grid.info.resolution, 6)) == (160, 40, 0.1)
+    assert max(grid.data) == 100 and min(grid.data) >= 0
+    covariance = np.array(seen.messages["pose"][-1].pose.covariance).reshape(6, 6)
+    assert np.all(np.isfinite(covariance)) and covariance[0, 0] > 0 and covariance[5, 5] > 0
+
+
+def scan(ranges, angle_increment=0.1):
+    msg = LaserScan()
+    msg.angle_min, msg.angle_increment = -math.pi, angle_increment
+    msg.range_min, msg.range_max = 0.05, 12.0
+    msg.ranges = [float(r) for r in ranges]
+    return msg
+
+
+def odom(x, y, yaw):
+    msg = Odometry()
+    fill_pose(msg.pose.pose, x, y, yaw)
+    return msg
+
+
+def drive(executor, localizer, publishers, messages):
+    for topic, msg in messages:
+        publishers[topic].publish(msg)
+        spin_until(executor, lambda: False, 0.05)
+
+
+def test_bad_messages_are_dropped_counted_and_never_make_a_nan_belief(nodes, executor,
+                                                                      collector_factory):
+    localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=8)
+    driver = collector_factory({"pose": PoseWithCovarianceStamped}, name="driver")
+    publishers = {t: driver.node.create_publisher(m, t, 10) for t, m in (
+        ("scan", LaserScan), ("odom", Odometry), ("initialpose", PoseWithCovarianceStamped))}
+    assert spin_until(executor, lambda: all(p.get_subscription_count() for p in
+                                            publishers.values()), 10.0)
+    drive(executor, localizer, publishers, [
+        ("odom", odom(0.0, 0.0, 0.0)),
+        ("scan", scan([float("nan")] * 30 + [1.0] * 33)),      # NaN ranges: dropped beams
+        ("scan", scan([1.0] * 63, angle_increment=0.0)),          # a scan with no geometry
+        ("odom", odom(float("nan"), 0.0, 0.0)),
+        ("odom", odom(5.0, 0.0, 0.0)),                            # a jump past max_odom_jump
+        ("scan", scan([float("inf")] * 63)),                      # no return at all: fine
+    ])
+    assert spin_until(executor, lambda: localizer.rejected["odom_jump"] == 1, 5.0)
+    assert localizer.rejected["nan_ranges"] == 30
+    assert localizer.rejected["bad_scan"] == 1
+    assert localizer.rejected["non_finite_odom"] == 1
+    belief = localizer.localization.belief
+    assert np.all(np.isfinite(belief)) and belief.sum() == pytest.approx(1.0)
+
+
+def test_initial_pose_then_global_localization(nodes, executor, collector_factory):
+    localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=72)
+    driver = collector_factory({"localization_quality": Float64}, name="driver")
+    initial = driver.node.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
+    assert spin_until(executor, lambda: initial.get_subscription_count() == 1, 10.0)
+    msg = PoseWithCovarianceStamped()
+    fill_pose(msg.pose.pose, 4.05, 2.05, 0.0)
+    cov = np.zeros((6, 6))
+    cov[0, 0] = cov[1, 1] = 0.01
+    cov[5, 5] = 0.001
+    msg.pose.covariance = cov.ravel().tolist()
+    initial.publish(msg)
+    assert spin_until(executor, lambda: localizer.handled["initialpose"] == 1, 5.0)
+    assert spin_until(executor, lambda: driver.count("localization_quality") >= 2
+                      and driver.messages["localization_quality"][-1].data > 0.5, 5.0)
+    client = driver.node.create_client(Trigger, "/grid_localizer/global_localization")
+    assert client.wait_for_service(timeout_sec=5.0)
+    future = client.call_async(Trigger.Request())
+    assert spin_until(executor, future.done, 5.0) and future.result().success
+    assert spin_until(executor, lambda: driver.messages["localization_quality"][-1].data < 0.01,
+                      5.0)
+
+
+def test_a_map_from_the_topic_and_a_bad_one(nodes, executor, collector_factory):
+    localizer = nodes(GridLocalizer, heading_bins=4)
+    driver = collector_factory({"pose": PoseWithCovarianceStamped}, name="driver")
+    maps = driver.node.create_publisher(OccupancyGrid, "map", latched_qos(1))
+    bad = OccupancyGrid()
+    bad.info.width, bad.info.height, bad.info.resolution = 4, 4, 0.1
+    bad.data = [0] * 15                                   # 15 cells for a 4 x 4 grid
+    maps.publish(bad)
+    assert spin_until(executor, lambda: localizer.rejected["bad_map"] == 1, 10.0)
+    assert localizer.localization is None
+    good = OccupancyGrid()
+    good.info.width, good.info.height, good.info.resolution = 6, 5, 0.1
+    good.info.origin.orientation.w = 1.0
+    good.data = [100] * 6 + [100, 0, 0, 0, 0, 100] * 3 + [100] * 6
+    maps.publish(good)
+    assert spin_until(executor, lambda: localizer.localization is not None, 10.0)
+    assert localizer.localization.model.free.sum() == 12
+
+
+@pytest.mark.parametrize("values, message", [
+    ({"map_file": "/nonexistent/map.yaml"}, "map_file"),
+    ({"map_file": CORRIDOR, "resolution": 0.07}, "whole multiple"),
+    ({"map_file": CORRIDOR, "max_states": 1000}, "max_states"),
+    ({"frame_id": " "}, "frame_id"),
+])
+def test_bad_localizer_parameters_are_one_clear_error(context, values, message):
+    with pytest.raises(ConfigurationError, match=message):
+        GridLocalizer(context=context, parameter_overrides=params(**values))
+
+
+def test_the_robot_needs_a_map_and_a_free_start(context):
+    with pytest.raises(ConfigurationError, match="map_file"):
+        PlanarRobot(context=context)
+    with pytest.raises(ConfigurationError, match="initial_pose"):
+        PlanarRobot(context=context, parameter_overrides=params(
+            map_file=CORRIDOR, initial_pose=[0.0, 0.0, 0.0]))

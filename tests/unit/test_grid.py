@@ -1,0 +1,189 @@
+"""The grid Markov localization core against brute force: explicit loops over states and beams."""
+
+import math
+
+import numpy as np
+import pytest
+
+from estimation_nodes.core import grid
+
+RNG = np.random.default_rng(4)
+
+
+def small_model(rows=7, cols=9, bins=8, resolution=0.1, obstacles=0.2):
+    rng = np.random.default_rng(rows * 100 + cols)
+    free = rng.random((rows, cols)) > obstacles
+    free[rows // 2, cols // 2] = True
+    log_field = np.log(0.05 + rng.random((rows, cols)))
+    return grid.GridModel(free=free, log_field=log_field, log_outside=math.log(0.01),
+                          resolution=resolution, origin=(-0.3, 1.2), heading_bins=bins)
+
+
+def random_belief(model):
+    belief = RNG.random(model.shape) * model.free[None]
+    return belief / belief.sum()
+
+
+def brute_force_scan(model, ranges, angles):
+    """For every state, every beam: where its end point falls, and the field there."""
+    xs, ys = model.cell_centres()
+    rows, cols = model.free.shape
+    out = np.zeros(model.shape)
+    for k in range(model.heading_bins):
+        heading = k * 2 * math.pi / model.heading_bins
+        for i in range(rows):
+            for j in range(cols):
+                total = 0.0
+                for r, phi in zip(ranges, angles):
+                    x = xs[j] + r * math.cos(heading + phi)
+                    y = ys[i] + r * math.sin(heading + phi)
+                    col = math.floor((x - model.origin[0]) / model.resolution)
+                    row = math.floor((y - model.origin[1]) / model.resolution)
+                    inside = 0 <= row < rows and 0 <= col < cols
+                    total += model.log_field[row, col] if inside else model.log_outside
+                out[k, i, j] = total
+    return out
+
+
+def brute_force_predict(belief, model, delta, noise):
+    """Every source state's mass sent to its target cells one by one: bilinear in x, y,
+    linear in heading, then spread by the Gaussian taps, each cell visited in loops."""
+    rot1, trans, rot2 = delta
+    bins, rows, cols = model.shape
+    moved = np.zeros(model.shape)
+    turn = (rot1 + rot2) / model.bin_width
+    for k in range(bins):
+        angle = k * model.bin_width + rot1
+        sc = trans * math.cos(angle) / model.resolution
+        sr = trans * math.sin(angle) / model.resolution
+        for i in range(rows):
+            for j in range(cols):
+                mass = belief[k, i, j]
+                for ti, wi in ((math.floor(i + sr), 1 - (sr - math.floor(sr))),
+                               (math.floor(i + sr) + 1, sr - math.floor(sr))):
+                    for tj, wj in ((math.floor(j + sc), 1 - (sc - math.floor(sc))),
+                                   (math.floor(j + sc) + 1, sc - math.floor(sc))):
+                        whole, part = math.floor(turn), turn - math.floor(turn)
+                        for tk, wk in (((k + whole) % bins, 1 - part),
+                                       ((k + whole + 1) % bins, part)):
+                            if 0 <= ti < rows and 0 <= tj < cols:
+                                moved[tk, ti, tj] += mass * wi * wj * wk
+    sigma_m = noise.floor_m + noise.alpha3 * trans + noise.alpha4 * (abs(rot1) + abs(rot2))
+    sigma_rad = noise.floor_rad + noise.alpha1 * (abs(rot1) + abs(rot2)) + noise.alpha2 * trans
+    taps_xy = grid.gaussian_taps(sigma_m / model.resolution)
+    taps_k = grid.gaussian_taps(sigma_rad / model.bin_width)
+    hxy, hk = taps_xy.size // 2, taps_k.size // 2
+    spread = np.zeros(model.shape)
+    for k in range(bins):
+        for i in range(rows):
+            for j in range(cols):
+                mass = moved[k, i, j]
+                if mass == 0:
+                    continue
+                for a, wa in enumerate(taps_k):
+                    for b, wb in enumerate(taps_xy):
+                        for c, wc in enumerate(taps_xy):
+                            ti, tj = i + b - hxy, j + c - hxy
+                            if 0 <= ti < rows and 0 <= tj < cols:
+                                spread[(k + a - hk) % bins, ti, tj] += mass * wa * wb * wc
+    spread *= model.free[None]
+    return spread / spread.sum()
+
+
+@pytest.mark.parametrize("beams", [1, 5, 12])
+def test_scan_log_likelihood_equals_brute_force(beams):
+    model = small_model()
+    ranges = RNG.uniform(0.05, 1.2, beams)
+    angles = RNG.uniform(-math.pi, math.pi, beams)
+    np.testing.assert_allclose(grid.scan_log_likelihood(model, ranges, angles),
+                               brute_force_scan(model, ranges, angles), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("delta", [
+    (0.0, 0.0, 0.0),                      # standing still: only the noise floor spreads
+    (0.3, 0.17, -0.1),                    # a fraction of a cell, turning
+    (-2.0, 0.55, 1.1),                    # several cells, a large turn
+    (math.pi / 2, 0.45, 0.0),             # out of the small map for many states
+])
+def test_prediction_equals_brute_force(delta):
+    model = small_model()
+    noise = grid.OdometryNoise(alpha1=0.1, alpha2=0.3, alpha3=0.15, alpha4=0.05)
+    belief = random_belief(model)
+    np.testing.assert_allclose(grid.predict(belief, model, delta, noise),
+                               brute_force_predict(belief, model, delta, noise),
+                               rtol=0, atol=1e-12)
+
+
+def test_correction_is_bayes_rule_and_returns_the_log_evidence():
+    model = small_model()
+    belief = random_belief(model)
+    log_likelihood = grid.scan_log_likelihood(model, [0.4, 0.7], [0.1, -1.3])
+    posterior, log_evidence = grid.correct(belief, log_likelihood)
+    joint = belief * np.exp(log_likelihood)
+    np.testing.assert_allclose(posterior, joint / joint.sum(), rtol=1e-12, atol=1e-15)
+    assert log_evidence == pytest.approx(math.log(joint.sum()), rel=1e-12)
+
+
+def test_a_scan_nothing_explains_raises_and_changes_nothing():
+    model = small_model()
+    belief = np.zeros(model.shape)
+    with pytest.raises(grid.ZeroEvidenceError):
+        grid.correct(belief, np.zeros(model.shape))
+
+
+def test_uniform_prior_covers_free_cells_only():
+    model = small_model()
+    belief = grid.uniform_over_free(model)
+    assert belief.sum() == pytest.approx(1.0)
+    assert np.all(belief[:, ~model.free] == 0)
+    assert np.allclose(belief[:, model.free], 1.0 / (model.free.sum() * model.heading_bins))
+
+
+def test_odometry_delta_of_the_book():
+    rot1, trans, rot2 = grid.odometry_delta((0.0, 0.0, 0.0), (1.0, 1.0, math.pi / 2))
+    assert trans == pytest.approx(math.sqrt(2))
+    assert rot1 == pytest.approx(math.pi / 4) and rot2 == pytest.approx(math.pi / 4)
+    assert grid.odometry_delta((0, 0, 0.5), (0, 0, -0.5)) == (0.0, 0.0, pytest.approx(-1.0))
+
+
+def test_a_certain_belief_gives_its_pose_quality_one_and_a_small_covariance():
+    model = small_model()
+    belief = np.zeros(model.shape)
+    belief[3, 3, 4] = 1.0
+    state = grid.most_likely_state(belief)
+    pose = grid.pose_of(model, state)
+    assert state == (3, 3, 4)
+    assert pose == pytest.approx((-0.3 + 0.45, 1.2 + 0.35, 3 * math.pi / 4 - 0.0), abs=1e-12)
+    assert grid.mass_near(belief, model, pose, 0.3, math.radians(10)) == pytest.approx(1.0)
+    cov = grid.covariance_around(belief, model, pose)
+    np.testing.assert_allclose(np.diag(cov), [0.01 / 12, 0.01 / 12, (math.pi / 4) ** 2 / 12])
+
+
+def test_two_far_modes_give_quality_one_half():
+    model = small_model(rows=20, cols=20, obstacles=0.0)
+    belief = np.zeros(model.shape)
+    belief[0, 2, 2] = belief[0, 17, 17] = 0.5
+    pose = grid.pose_of(model, grid.most_likely_state(belief))
+    assert grid.mass_near(belief, model, pose, 0.3, math.radians(10)) == pytest.approx(0.5)
+
+
+def test_belief_map_scales_the_maximum_over_headings_to_100():
+    model = small_model()
+    belief = random_belief(model)
+    picture = grid.belief_map(belief)
+    assert picture.dtype == np.int8 and picture.max() == 100 and picture.min() >= 0
+
+
+def test_gaussian_prior_centres_on_the_given_pose():
+    model = small_model(rows=20, cols=20, obstacles=0.0)
+    xs, ys = model.cell_centres()
+    prior = grid.gaussian_prior(model, xs[5], ys[12], math.pi / 2, np.diag([0.01, 0.01, 0.05]))
+    assert grid.most_likely_state(prior) == (2, 12, 5)
+    assert prior.sum() == pytest.approx(1.0)
+
+
+def test_bad_models_are_refused_with_the_field_named():
+    with pytest.raises(ValueError, match="resolution"):
+        grid.GridModel(np.ones((2, 2), bool), np.zeros((2, 2)), -1.0, 0.0, (0, 0), 4)
+    with pytest.raises(ValueError, match="no free cell"):
+        grid.GridModel(np.zeros((2, 2), bool), np.zeros((2, 2)), -1.0, 0.1, (0, 0), 4)
