@@ -26,12 +26,17 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cache
+from types import ModuleType
 
 import numpy as np
 
 from estimation_nodes.core.models import FloatArray
 
 TWO_PI = 2.0 * math.pi
+#: Beliefs of at least this many states take the compiled kernels (core/compiled_grid.py)
+#: when numba imports; smaller ones never import it.
+COMPILED_MIN_STATES = 100_000
 
 
 class ZeroEvidenceError(ValueError):
@@ -159,28 +164,82 @@ def odometry_delta(previous: tuple[float, float, float],
     return rot1, trans, rot2
 
 
-def predict(belief: FloatArray, model: GridModel, delta: tuple[float, float, float],
-            noise: OdometryNoise) -> FloatArray:
-    """The belief after a motion (rot1, trans, rot2) measured by odometry."""
+@cache
+def _compiled_kernels() -> ModuleType | None:
+    """core/compiled_grid.py, compiled (or loaded from numba's cache); None without numba."""
+    try:
+        from estimation_nodes.core import compiled_grid
+    except ImportError:
+        return None
+    compiled_grid.warm_up()
+    return compiled_grid
+
+
+def compiled_kernels(states: int, allowed: bool = True) -> ModuleType | None:
+    """The compiled kernels a belief of ``states`` states uses, or None for numpy's."""
+    return _compiled_kernels() if allowed and states >= COMPILED_MIN_STATES else None
+
+
+def motion_noise(delta: tuple[float, float, float], noise: OdometryNoise,
+                 model: GridModel) -> tuple[float, float]:
+    """The spread of a motion: std in cells (x and y) and in heading bins."""
     rot1, trans, rot2 = delta
-    rotation = rot1 + rot2
-    # Each heading layer moves by the displacement seen from that heading.
-    shifted = np.empty_like(belief)
-    for k, heading in enumerate(model.headings()):
-        angle = heading + rot1
-        shifted[k] = _shift_bilinear(belief[k], trans * math.cos(angle) / model.resolution,
-                                     trans * math.sin(angle) / model.resolution)
-    turned = _shift_headings(shifted, rotation / model.bin_width)
     sigma_m = noise.floor_m + noise.alpha3 * trans + noise.alpha4 * (abs(rot1) + abs(rot2))
     sigma_rad = noise.floor_rad + noise.alpha1 * (abs(rot1) + abs(rot2)) + noise.alpha2 * trans
-    spread = _blur_cyclic(turned, sigma_rad / model.bin_width, axis=0)
-    spread = _blur(spread, sigma_m / model.resolution, axis=1)
-    spread = _blur(spread, sigma_m / model.resolution, axis=2)
+    return sigma_m / model.resolution, sigma_rad / model.bin_width
+
+
+def layer_shifts(model: GridModel, rot1: float, trans: float) -> tuple[FloatArray, FloatArray]:
+    """How far (rows, columns) each heading layer moves: the displacement seen from it."""
+    angles = model.headings() + rot1
+    return (trans * np.sin(angles) / model.resolution,
+            trans * np.cos(angles) / model.resolution)
+
+
+def predict(belief: FloatArray, model: GridModel, delta: tuple[float, float, float],
+            noise: OdometryNoise, compiled: bool = True) -> FloatArray:
+    """The belief after a motion (rot1, trans, rot2) measured by odometry."""
+    kernels = compiled_kernels(belief.size, compiled)
+    if kernels is not None:
+        return _predict_compiled(kernels, belief, model, delta, noise)
+    rot1, trans, rot2 = delta
+    shift_rows, shift_cols = layer_shifts(model, rot1, trans)
+    shifted = np.empty_like(belief)
+    for k in range(model.heading_bins):
+        shifted[k] = _shift_bilinear(belief[k], shift_cols[k], shift_rows[k])
+    turned = _shift_headings(shifted, (rot1 + rot2) / model.bin_width)
+    sigma_cells, sigma_bins = motion_noise(delta, noise, model)
+    spread = _blur_cyclic(turned, sigma_bins, axis=0)
+    spread = _blur(spread, sigma_cells, axis=1)
+    spread = _blur(spread, sigma_cells, axis=2)
     spread *= model.free[None, :, :]
-    total = spread.sum()
+    return _normalized(spread, float(spread.sum()))
+
+
+def _predict_compiled(kernels: ModuleType, belief: FloatArray, model: GridModel,
+                      delta: tuple[float, float, float], noise: OdometryNoise) -> FloatArray:
+    rot1, trans, rot2 = delta
+    shift_rows, shift_cols = layer_shifts(model, rot1, trans)
+    sigma_cells, sigma_bins = motion_noise(delta, noise, model)
+    first, second = np.empty_like(belief), np.empty_like(belief)
+    kernels.shift_motion(belief, shift_rows, shift_cols, (rot1 + rot2) / model.bin_width, first)
+    taps = gaussian_taps(sigma_bins)
+    if taps.size > 1:
+        kernels.blur_headings(first, taps, second)
+        first, second = second, first
+    taps = gaussian_taps(sigma_cells)
+    if taps.size > 1:
+        kernels.blur_rows(first, taps, second)
+        first, second = second, first
+    total = kernels.blur_cols_masked(first, taps, model.free, second)
+    return _normalized(second, total)
+
+
+def _normalized(belief: FloatArray, total: float) -> FloatArray:
     if not total > 0:
         raise ZeroEvidenceError("the motion left no probability on a free cell")
-    return spread / total
+    belief /= total
+    return belief
 
 
 def beam_endpoints(model: GridModel, ranges: FloatArray, angles: FloatArray) -> np.ndarray:
@@ -193,8 +252,8 @@ def beam_endpoints(model: GridModel, ranges: FloatArray, angles: FloatArray) -> 
                     axis=-1).astype(np.int64)
 
 
-def scan_log_likelihood(model: GridModel, ranges: FloatArray,
-                        angles: FloatArray) -> FloatArray:
+def scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
+                        compiled: bool = True) -> FloatArray:
     """Sum over the beams of log p(beam | state), for every state: (K, H, W).
 
     ``ranges`` and ``angles`` are the beams to use (already without max-range
@@ -202,8 +261,13 @@ def scan_log_likelihood(model: GridModel, ranges: FloatArray,
     """
     offsets = beam_endpoints(model, ranges, angles)
     rows, cols = model.free.shape
-    total = np.zeros(model.shape)
     padded, pad = _padded_field(model, offsets)
+    kernels = compiled_kernels(int(np.prod(model.shape)), compiled)
+    if kernels is not None:
+        out = np.empty(model.shape)      # the kernel writes every element
+        kernels.scan_log_likelihood(padded, pad, offsets, model.heading_bins, rows, cols, out)
+        return out
+    total = np.zeros(model.shape)
     for k in range(model.heading_bins):
         layer = total[k]
         for dr, dc in offsets[k]:
@@ -215,6 +279,28 @@ def _padded_field(model: GridModel, offsets: np.ndarray) -> tuple[FloatArray, in
     """The log field with a border of ``log_outside`` wide enough for every offset."""
     pad = int(np.abs(offsets).max(initial=0)) + 1
     return np.pad(model.log_field, pad, constant_values=model.log_outside), pad
+
+
+def correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angles: FloatArray,
+                 compiled: bool = True) -> tuple[FloatArray, float]:
+    """``correct`` with a scan: posterior and log evidence. (A compiled kernel that also
+    weighted each row as soon as its beams were summed measured slower: numba's scalar exp
+    costs more than the pass numpy's vectorized one needs.)"""
+    return _correct_in(scan_log_likelihood(model, ranges, angles, compiled), belief)
+
+
+def _correct_in(log_likelihood: FloatArray, belief: FloatArray) -> tuple[FloatArray, float]:
+    """``correct``, the posterior written over ``log_likelihood`` (an array of ours): a
+    tensor of millions of states allocated anew costs more than the arithmetic."""
+    peak = float(log_likelihood.max())
+    weighted = np.subtract(log_likelihood, peak, out=log_likelihood)
+    np.exp(weighted, out=weighted)
+    np.multiply(weighted, belief, out=weighted)
+    total = float(weighted.sum())
+    if not total > 0:
+        raise ZeroEvidenceError("every state with probability rules the scan out")
+    weighted /= total
+    return weighted, peak + math.log(total)
 
 
 def correct(belief: FloatArray, log_likelihood: FloatArray) -> tuple[FloatArray, float]:

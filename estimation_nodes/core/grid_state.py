@@ -39,6 +39,8 @@ class GridLocalization:
                  update_min_a: float, max_odom_jump: float) -> None:
         self.model = model
         self.noise = noise
+        # Load a large grid's compiled kernels now, not during the first scan.
+        grid.compiled_kernels(int(np.prod(model.shape)))
         self._min_d, self._min_a, self._max_jump = update_min_d, update_min_a, max_odom_jump
         self.belief: FloatArray = grid.uniform_over_free(model)
         self.log_evidence = float("nan")
@@ -88,8 +90,7 @@ class GridLocalization:
         if self._reference is not None:
             delta = grid.odometry_delta(self._reference, self._latest)
             belief = grid.predict(belief, self.model, delta, self.noise)
-        log_likelihood = grid.scan_log_likelihood(self.model, ranges, angles)
-        self.belief, self.log_evidence = grid.correct(belief, log_likelihood)
+        self.belief, self.log_evidence = grid.correct_scan(belief, self.model, ranges, angles)
         self._reference = self._latest
         self.updates += 1
 

@@ -187,3 +187,39 @@ def test_bad_models_are_refused_with_the_field_named():
         grid.GridModel(np.ones((2, 2), bool), np.zeros((2, 2)), -1.0, 0.0, (0, 0), 4)
     with pytest.raises(ValueError, match="no free cell"):
         grid.GridModel(np.zeros((2, 2), bool), np.zeros((2, 2)), -1.0, 0.1, (0, 0), 4)
+
+
+def compiled_sized_model():
+    """Just above COMPILED_MIN_STATES: the compiled kernels' path."""
+    model = small_model(rows=60, cols=60, bins=36)
+    assert np.prod(model.shape) >= grid.COMPILED_MIN_STATES
+    return model
+
+
+def test_the_compiled_scan_equals_brute_force():
+    pytest.importorskip("numba")
+    model = compiled_sized_model()
+    ranges = RNG.uniform(0.05, 2.0, 3)
+    angles = RNG.uniform(-math.pi, math.pi, 3)
+    compiled = grid.scan_log_likelihood(model, ranges, angles)
+    assert grid.compiled_kernels(compiled.size) is not None
+    np.testing.assert_allclose(compiled, brute_force_scan(model, ranges, angles),
+                               rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("delta", [(0.0, 0.0, 0.0), (0.3, 0.17, -0.1), (-2.0, 0.55, 1.1),
+                                   (math.pi, 3.0, 0.0)])
+def test_the_compiled_prediction_equals_numpys(delta):
+    pytest.importorskip("numba")
+    model = compiled_sized_model()
+    noise = grid.OdometryNoise(alpha1=0.1, alpha2=0.3, alpha3=0.15, alpha4=0.05)
+    belief = random_belief(model)
+    np.testing.assert_allclose(grid.predict(belief, model, delta, noise),
+                               grid.predict(belief, model, delta, noise, compiled=False),
+                               rtol=0, atol=1e-15)
+    # And the whole correction, through both paths.
+    ranges, angles = RNG.uniform(0.1, 2.0, 8), RNG.uniform(-math.pi, math.pi, 8)
+    fast = grid.correct_scan(belief, model, ranges, angles)
+    slow = grid.correct_scan(belief, model, ranges, angles, compiled=False)
+    np.testing.assert_allclose(fast[0], slow[0], rtol=1e-12, atol=1e-300)
+    assert fast[1] == pytest.approx(slow[1], rel=1e-12)

@@ -1,0 +1,159 @@
+"""Compiled kernels of the grid filter (numba): the same steps as core/grid.py in fewer passes.
+
+numpy's prediction makes some fifty passes over the belief tensor (a shift
+per layer and per bilinear weight, two rolls for the headings, padded copies
+and a pass per tap for each of the three blurs). Here the motion (bilinear in
+x and y, linear in heading) is one scatter pass, and each blur one pass with
+its taps in registers; the scan's log likelihood is accumulated row by row,
+the output row and the field rows it reads staying in cache. Results equal
+numpy's to rounding (sums in another order); tests/unit/test_grid.py checks
+both paths against brute force.
+
+Importing this module imports numba; ``warm_up`` compiles the kernels or
+loads them from numba's cache (``cache=True``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from estimation_nodes.core.models import FloatArray
+
+_jit = njit(nogil=True, cache=True)
+
+
+@_jit
+def shift_motion(belief: FloatArray, shift_rows: FloatArray, shift_cols: FloatArray,
+                 turn: float, out: FloatArray) -> None:
+    """out = belief moved: layer k by (shift_rows[k], shift_cols[k]) cells (bilinear),
+    every heading by ``turn`` bins (linear, cyclic); mass leaving the grid is lost."""
+    bins, rows, cols = belief.shape
+    out[:] = 0.0
+    turn_base = int(np.floor(turn))
+    turn_frac = turn - turn_base
+    for k in range(bins):
+        k0 = (k + turn_base) % bins
+        k1 = (k0 + 1) % bins
+        base_r = int(np.floor(shift_rows[k]))
+        base_c = int(np.floor(shift_cols[k]))
+        fr = shift_rows[k] - base_r
+        fc = shift_cols[k] - base_c
+        for dr in range(2):
+            wr = fr if dr else 1.0 - fr
+            if wr == 0.0:
+                continue
+            for dc in range(2):
+                wc = fc if dc else 1.0 - fc
+                w = wr * wc
+                if w == 0.0:
+                    continue
+                rs = base_r + dr
+                cs = base_c + dc
+                i_lo, i_hi = max(0, -rs), min(rows, rows - rs)
+                j_lo, j_hi = max(0, -cs), min(cols, cols - cs)
+                w0 = w * (1.0 - turn_frac)
+                w1 = w * turn_frac
+                width = j_hi - j_lo
+                for i in range(i_lo, i_hi):
+                    src = belief[k, i, j_lo:j_hi]
+                    dst0 = out[k0, i + rs, j_lo + cs:j_hi + cs]
+                    for j in range(width):
+                        dst0[j] += w0 * src[j]
+                    if w1 != 0.0:
+                        dst1 = out[k1, i + rs, j_lo + cs:j_hi + cs]
+                        for j in range(width):
+                            dst1[j] += w1 * src[j]
+
+
+@_jit
+def blur_headings(source: FloatArray, taps: FloatArray, out: FloatArray) -> None:
+    """out[k] = sum_t taps[t] * source[(k + t - half) % K] (cyclic)."""
+    bins = source.shape[0]
+    half = taps.size // 2
+    out[:] = 0.0
+    for k in range(bins):
+        target = out[k].ravel()
+        for t in range(taps.size):
+            layer = source[(k + t - half) % bins].ravel()
+            weight = taps[t]
+            for n in range(target.size):
+                target[n] += weight * layer[n]
+
+
+@_jit
+def blur_rows(source: FloatArray, taps: FloatArray, out: FloatArray) -> None:
+    """out[k, i] = sum_t taps[t] * source[k, i + t - half] (rows, along y; zero outside)."""
+    bins, rows, cols = source.shape
+    half = taps.size // 2
+    out[:] = 0.0
+    for k in range(bins):
+        for i in range(rows):
+            target = out[k, i]
+            for t in range(taps.size):
+                r = i + t - half
+                if 0 <= r < rows:
+                    row = source[k, r]
+                    weight = taps[t]
+                    for j in range(cols):
+                        target[j] += weight * row[j]
+
+
+@_jit
+def blur_cols_masked(source: FloatArray, taps: FloatArray, free: np.ndarray,
+                     out: FloatArray) -> float:
+    """out[k, i, j] = free[i, j] * sum_t taps[t] * source[k, i, j + t - half] (along x);
+    returns the total, for the normalization. Each row is copied into a zero-padded
+    buffer, so the taps run over plain slices without bounds checks."""
+    bins, rows, cols = source.shape
+    half = taps.size // 2
+    buffer = np.zeros(cols + 2 * half)
+    mask = free.astype(np.float64)
+    total = 0.0
+    for k in range(bins):
+        for i in range(rows):
+            buffer[half:half + cols] = source[k, i]
+            target = out[k, i]
+            first = buffer[0:cols]
+            weight = taps[0]
+            for j in range(cols):
+                target[j] = weight * first[j]
+            for t in range(1, taps.size):
+                segment = buffer[t:t + cols]
+                weight = taps[t]
+                for j in range(cols):
+                    target[j] += weight * segment[j]
+            keep = mask[i]
+            for j in range(cols):
+                target[j] *= keep[j]
+                total += target[j]
+    return total
+
+
+@_jit
+def scan_log_likelihood(padded: FloatArray, pad: int, offsets: np.ndarray, bins: int,
+                        rows: int, cols: int, out: FloatArray) -> None:
+    """out[k, i, j] = sum_b padded[pad + i + dr[k, b], pad + j + dc[k, b]]."""
+    beams = offsets.shape[1]
+    for k in range(bins):
+        for i in range(rows):
+            target = out[k, i]
+            target[:] = 0.0
+            for b in range(beams):
+                start = pad + offsets[k, b, 1]
+                segment = padded[pad + i + offsets[k, b, 0], start:start + cols]
+                for j in range(cols):
+                    target[j] += segment[j]
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) every kernel on a tiny input."""
+    belief = np.full((2, 3, 3), 1.0 / 18)
+    out = np.empty_like(belief)
+    shift_motion(belief, np.zeros(2), np.zeros(2), 0.0, out)
+    taps = np.array([0.25, 0.5, 0.25])
+    blur_headings(belief, taps, out)
+    blur_rows(belief, taps, out)
+    blur_cols_masked(belief, taps, np.ones((3, 3), dtype=np.bool_), out)
+    offsets = np.zeros((2, 1, 2), dtype=np.int64)
+    scan_log_likelihood(np.zeros((5, 5)), 1, offsets, 2, 3, 3, out)
