@@ -81,6 +81,10 @@ from estimation_nodes.params.specs import ESTIMATOR_SPECS
 WARN_THROTTLE_S = 5.0
 #: Order of events stamped at the same instant: a move before the readings after it.
 MOVE, READING = 0, 1
+#: How often the estimator looks for move publishers it has not matched yet, and how long
+#: at most it holds readings for one (a publisher it can never match: incompatible QoS).
+MATCH_CHECK_PERIOD_S = 0.05
+MATCH_WAIT_LIMIT_S = 2.0
 
 
 class Estimator(Node):
@@ -149,11 +153,22 @@ class Estimator(Node):
                 (Float64MultiArray, topics.KALMAN_MEASUREMENT, self._on_kalman_measurement,
                  READING),
             ]
+        self._move_subscriptions = []
         for msg_type, topic, handler, rank in inputs:
             subscription = self.create_subscription(
                 msg_type, topic, self._arrival(handler, rank), INPUT_QOS,
                 event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
             self._watch_input_events(subscription, topic)
+            if rank == MOVE:
+                self._move_subscriptions.append(subscription)
+        # Readings held while a move publisher is in the graph but not matched yet: its
+        # first moves are on their way, and a reading applied before them would only be
+        # provisional (republished once they come).
+        self._held_readings: list[tuple[int, int, Any]] = []
+        self._moves_unmatched_since: float | None = None
+        self._unmatchable = False
+        if self._order is not None:
+            self.create_timer(MATCH_CHECK_PERIOD_S, self._check_move_publishers)
         self.add_waitable(self._input_events)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(self._values["diagnostics_period"], self._publish_diagnostics)
@@ -221,9 +236,36 @@ class Estimator(Node):
                 self._event_stamp_ns = stamp
                 handler(msg, True)
                 return
-            self._account(self._order.submit(stamp, rank, (stamp, handler, msg)))
+            event = (stamp, rank, (stamp, handler, msg))
+            if self._held_readings or (rank == READING
+                                       and self._moves_unmatched_since is not None):
+                self._held_readings.append(event)
+                return
+            self._account(self._order.submit(*event))
 
         return on_message
+
+    def _check_move_publishers(self) -> None:
+        """Note a move publisher the graph shows but this node has not matched; once none is
+        left (or after MATCH_WAIT_LIMIT_S: one it cannot match), apply the readings held."""
+        unmatched = any(self.count_publishers(sub.topic_name) > sub.get_publisher_count()
+                        for sub in self._move_subscriptions)
+        if not unmatched:
+            self._unmatchable = False
+        if unmatched and not self._unmatchable:
+            now = time.monotonic()
+            if self._moves_unmatched_since is None:
+                self._moves_unmatched_since = now
+            if now - self._moves_unmatched_since <= MATCH_WAIT_LIMIT_S:
+                return
+            self._unmatchable = True
+            self._warn("unmatched_move_publisher", "a move publisher stays unmatched (its QoS?):"
+                       " readings no longer wait for it")
+        self._moves_unmatched_since = None
+        held, self._held_readings = self._held_readings, []
+        assert self._order is not None
+        for event in held:
+            self._account(self._order.submit(*event))
 
     # Replayable, for the causal order: the state of both filters, and one event.
 

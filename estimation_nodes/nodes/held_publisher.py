@@ -80,3 +80,29 @@ class HeldPublisher:
         if not self._held and self._timer is not None:
             self._node.destroy_timer(self._timer)
             self._timer = None
+
+
+def subscribe_when_ready(node: Node, publishers: list[HeldPublisher], hold: bool,
+                         subscribe) -> None:
+    """Call ``subscribe`` (which takes the simulator's commands) once every one of
+    ``publishers`` reaches the nodes it must, or at once without ``hold``.
+
+    A reading held and sent later carries the later time: ordered by source
+    timestamps (core/causal_order.py) it would land after moves that came after it.
+    So a simulator takes no command before its readings can go out at once; the
+    commander, which waits for it as a subscriber, starts only then. Holding remains
+    for an estimator that leaves mid-run.
+    """
+    if not hold or all(publisher.ready() for publisher in publishers):
+        subscribe()
+        return
+    node.get_logger().info("waiting for the estimator to hear the readings before taking "
+                           "commands")
+
+    def check() -> None:
+        if all(publisher.ready() for publisher in publishers):
+            node.destroy_timer(timer)
+            node.get_logger().info("the readings reach the estimator: taking commands")
+            subscribe()
+
+    timer = node.create_timer(HOLD_CHECK_PERIOD_S, check)

@@ -16,7 +16,7 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from estimation_nodes.core import simulation
-from estimation_nodes.nodes.held_publisher import HeldPublisher
+from estimation_nodes.nodes.held_publisher import HeldPublisher, subscribe_when_ready
 from estimation_nodes.nodes.messages import to_multiarray
 from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
@@ -45,8 +45,10 @@ class LinearSystem(Node):
         self._measurement_pub = HeldPublisher(
             self, Float64MultiArray, topics.KALMAN_MEASUREMENT, values["hold_until_matched"],
             values["hold_for_nodes"])
-        self.create_subscription(
-            Float64MultiArray, topics.KALMAN_INPUT, self._on_kalman_input, INPUT_QOS)
+        subscribe_when_ready(self, [self._measurement_pub], values["hold_until_matched"],
+                             lambda: self.create_subscription(
+                                 Float64MultiArray, topics.KALMAN_INPUT, self._on_kalman_input,
+                                 INPUT_QOS))
         self.rejected = 0
         model = self._model
         self.get_logger().info(

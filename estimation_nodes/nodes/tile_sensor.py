@@ -20,7 +20,7 @@ from estimation_nodes.core import simulation
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
 )
-from estimation_nodes.nodes.held_publisher import HeldPublisher
+from estimation_nodes.nodes.held_publisher import HeldPublisher, subscribe_when_ready
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
@@ -53,7 +53,9 @@ class TileSensor(Node):
         self._tile_pub = HeldPublisher(self, String, topics.TILE_OBSERVATION, hold, hold_for)
         self._measurement_pub = HeldPublisher(self, Float64, topics.POSITION_MEASUREMENT, hold,
                                               hold_for)
-        self.create_subscription(Int32, topics.MOTION_CMD, self._on_motion_cmd, INPUT_QOS)
+        subscribe_when_ready(self, [self._tile_pub, self._measurement_pub], hold,
+                             lambda: self.create_subscription(
+                                 Int32, topics.MOTION_CMD, self._on_motion_cmd, INPUT_QOS))
         mode = "scripted" if self._scripted else f"random (seed {seed})"
         self.get_logger().info(f"ready: {self._model.size} cells, start cell "
                                f"{self._position % self._model.size}, {mode}")

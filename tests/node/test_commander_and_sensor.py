@@ -88,47 +88,62 @@ def test_sensor_rejects_unknown_scripted_class(context):
         TileSensor(context=context, parameter_overrides=params(scripted_observations=["grey"]))
 
 
-def test_sensor_holds_readings_until_someone_listens(context, executor, collector_factory):
+def test_sensor_takes_commands_once_its_readings_reach_the_estimator_and_holds_after(
+        context, executor, collector_factory):
+    """No command before the readings can go out at once (a reading held and sent later
+    would carry a later time than the moves after it); an estimator that leaves later
+    gets what was read meanwhile when it is back."""
     sensor = TileSensor(context=context, parameter_overrides=params(
         scripted_observations=["bright", "dark", "dark"], hold_for_nodes=["late"]))
     executor.add_node(sensor)
     driver = collector_factory({"true_position": Int64}, name="driver")
     pub = driver.node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
+    spin_until(executor, lambda: False, 0.5)
+    assert pub.get_subscription_count() == 0       # nobody hears the readings yet
+    late = collector_factory({"tile_observation": (String, INPUT_QOS),
+                              "position_measurement": (Float64, INPUT_QOS)}, name="late")
     assert spin_until(executor, lambda: pub.get_subscription_count() == 1, 10.0)
-    for _ in range(3):
+    pub.publish(Int32(data=1))
+    assert spin_until(executor, lambda: late.count("tile_observation") == 1, 10.0)
+    # The estimator leaves: readings are held, then sent in order when one is back.
+    late.node.destroy_subscription(late.subscriptions.pop("tile_observation"))
+    assert spin_until(executor, lambda: sensor._tile_pub._publisher.get_subscription_count()
+                      == 0, 10.0)
+    for _ in range(2):
         pub.publish(Int32(data=1))
     assert spin_until(executor, lambda: driver.count("true_position") == 3, 10.0)
-    assert sensor._tile_pub.held == 3   # nobody subscribed to tile_observation yet
-    late = collector_factory({"tile_observation": (String, INPUT_QOS)}, name="late")
-    assert spin_until(executor, lambda: late.count("tile_observation") == 3, 10.0)
-    assert [m.data for m in late.messages["tile_observation"]] == ["bright", "dark", "dark"]
+    assert sensor._tile_pub.held == 2
+    back = collector_factory({"tile_observation": (String, INPUT_QOS),
+                              "position_measurement": (Float64, INPUT_QOS)}, name="late")
+    assert spin_until(executor, lambda: back.count("tile_observation") == 2, 10.0)
+    assert [m.data for m in back.messages["tile_observation"]] == ["dark", "dark"]
     assert sensor._tile_pub.held == 0
     sensor.destroy_node()
 
 
 def test_sensor_holds_readings_for_the_estimator_not_for_a_recorder(context, executor,
                                                                    collector_factory):
-    """A recorder that matches first does not let readings out that the estimator would
-    miss: they wait for a subscriber named as in hold_for_nodes (estimator by default)."""
+    """A recorder that matches first does not let the sensor start: it takes commands
+    once a subscriber named as in hold_for_nodes (estimator by default) hears it."""
     sensor = TileSensor(context=context, parameter_overrides=params(
         scripted_observations=["bright", "dark", "dark"]))
     executor.add_node(sensor)
     recorder = collector_factory({"tile_observation": (String, INPUT_QOS),
                                   "true_position": Int64}, name="recorder")
     pub = recorder.node.create_publisher(Int32, "motion_cmd", INPUT_QOS)
-    assert spin_until(executor, lambda: pub.get_subscription_count() == 1
-                      and sensor._tile_pub._publisher.get_subscription_count() == 1, 10.0)
+    assert spin_until(executor, lambda: sensor._tile_pub._publisher.get_subscription_count()
+                      == 1, 10.0)
+    spin_until(executor, lambda: False, 0.5)
+    assert pub.get_subscription_count() == 0
+    estimator = collector_factory({"tile_observation": (String, INPUT_QOS),
+                                   "position_measurement": (Float64, INPUT_QOS)},
+                                  name="estimator")
+    assert spin_until(executor, lambda: pub.get_subscription_count() == 1, 10.0)
     for _ in range(3):
         pub.publish(Int32(data=1))
-    assert spin_until(executor, lambda: recorder.count("true_position") == 3, 10.0)
-    spin_until(executor, lambda: False, 0.3)
-    assert recorder.count("tile_observation") == 0 and sensor._tile_pub.held == 3
-    estimator = collector_factory({"tile_observation": (String, INPUT_QOS)}, name="estimator")
-    assert spin_until(executor, lambda: estimator.count("tile_observation") == 3, 10.0)
-    assert spin_until(executor, lambda: recorder.count("tile_observation") == 3, 10.0)
+    assert spin_until(executor, lambda: estimator.count("tile_observation") == 3
+                      and recorder.count("tile_observation") == 3, 10.0)
     assert [m.data for m in estimator.messages["tile_observation"]] == ["bright", "dark", "dark"]
-    assert [m.data for m in recorder.messages["tile_observation"]] == ["bright", "dark", "dark"]
-    assert sensor._tile_pub.held == 0
     sensor.destroy_node()
 
 

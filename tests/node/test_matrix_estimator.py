@@ -202,7 +202,9 @@ def test_the_simulated_system_drops_an_input_it_cannot_follow(context, executor,
                                                               collector_factory):
     params = [Parameter(k, value=v) for k, v in TRACKING.items()
               if k.startswith("kalman.matrix.")]
-    system = LinearSystem(context=context, parameter_overrides=params)
+    # No measurement subscriber here: it takes inputs without waiting for one.
+    system = LinearSystem(context=context, parameter_overrides=[
+        *params, Parameter("hold_until_matched", value=False)])
     executor.add_node(system)
     out = collector_factory({"true_state": (Float64MultiArray, latched_qos(100))})
     inputs = out.node.create_publisher(Float64MultiArray, "kalman_input", INPUT_QOS)
