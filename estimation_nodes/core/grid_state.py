@@ -1,5 +1,11 @@
 """The running grid localization: belief, odometry reference, and the update rule.
 
+With ``kidnap_probability`` > 0 a uniform share of that much probability is
+mixed into the belief before each correction (the chance that the robot was
+carried anywhere since the last update), so a kidnapped robot is found again
+by the scans alone; 0 keeps the exact filter (recovery through
+``global_localization``).
+
 As AMCL: odometry is followed continuously, and a scan updates the filter
 (a prediction with the motion since the last update, then the correction)
 only once the robot moved ``update_min_d`` or turned ``update_min_a`` since
@@ -36,12 +42,15 @@ class GridLocalization:
     """Grid Markov localization of one robot on one map."""
 
     def __init__(self, model: grid.GridModel, noise: grid.OdometryNoise, update_min_d: float,
-                 update_min_a: float, max_odom_jump: float) -> None:
+                 update_min_a: float, max_odom_jump: float,
+                 kidnap_probability: float = 0.0) -> None:
         self.model = model
         self.noise = noise
         # Load a large grid's compiled kernels now, not during the first scan.
         grid.compiled_kernels(int(np.prod(model.shape)))
         self._min_d, self._min_a, self._max_jump = update_min_d, update_min_a, max_odom_jump
+        self._kidnap = kidnap_probability
+        self._uniform = grid.uniform_over_free(model) if kidnap_probability > 0 else None
         self.belief: FloatArray = grid.uniform_over_free(model)
         self.log_evidence = float("nan")
         #: The odometry pose at the last update (None: no update yet) and the latest one.
@@ -90,6 +99,10 @@ class GridLocalization:
         if self._reference is not None:
             delta = grid.odometry_delta(self._reference, self._latest)
             belief = grid.predict(belief, self.model, delta, self.noise)
+        if self._uniform is not None:
+            # The robot may have been carried anywhere: a little of the belief everywhere,
+            # so a kidnapped robot is found again by the scans alone.
+            belief = (1.0 - self._kidnap) * belief + self._kidnap * self._uniform
         self.belief, self.log_evidence = grid.correct_scan(belief, self.model, ranges, angles)
         self._reference = self._latest
         self.updates += 1

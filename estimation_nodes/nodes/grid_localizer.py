@@ -42,6 +42,7 @@ from estimation_nodes.nodes.grid_messages import (
 from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.params import topics
 from estimation_nodes.params.maps import (
     MapError,
     build_grid_localizer_settings,
@@ -67,21 +68,21 @@ class GridLocalizer(Node):
         self.localization: GridLocalization | None = None
         self.last_update_s = float("nan")
         latched = latched_qos(1)
-        self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, "pose", latched)
-        self._belief_pub = self.create_publisher(OccupancyGrid, "belief_map", latched)
-        self._quality_pub = self.create_publisher(Float64, "localization_quality", latched)
+        self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, topics.POSE, latched)
+        self._belief_pub = self.create_publisher(OccupancyGrid, topics.BELIEF_MAP, latched)
+        self._quality_pub = self.create_publisher(Float64, topics.LOCALIZATION_QUALITY, latched)
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
         self._pose_msg = PoseWithCovarianceStamped()
         if self._settings.model is not None:
             self._start(self._settings.model)
         else:
-            self.create_subscription(OccupancyGrid, "map", self._on_map, latched)
+            self.create_subscription(OccupancyGrid, topics.MAP, self._on_map, latched)
         # Best effort takes both best-effort and reliable publishers; a scan is only worth
         # its latest, while odometry is followed in order.
-        self.create_subscription(LaserScan, "scan", self._on_scan, qos_profile_sensor_data)
-        self.create_subscription(Odometry, "odom", self._on_odom, 50)
-        self.create_subscription(PoseWithCovarianceStamped, "initialpose", self._on_initial_pose,
-                                 10)
+        self.create_subscription(LaserScan, topics.SCAN, self._on_scan, qos_profile_sensor_data)
+        self.create_subscription(Odometry, topics.ODOM, self._on_odom, 50)
+        self.create_subscription(PoseWithCovarianceStamped, topics.INITIAL_POSE,
+                                 self._on_initial_pose, 10)
         self.create_service(Trigger, "~/global_localization", self._on_global_localization)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(self._values["diagnostics_period"], self._publish_diagnostics)
@@ -89,7 +90,8 @@ class GridLocalizer(Node):
     def _start(self, model: grid.GridModel) -> None:
         self.localization = GridLocalization(
             model, self._settings.noise, self._values["update_min_d"],
-            self._values["update_min_a"], self._values["max_odom_jump"])
+            self._values["update_min_a"], self._values["max_odom_jump"],
+            self._values["kidnap_probability"])
         rows, cols = model.free.shape
         self.get_logger().info(
             f"ready: {cols} x {rows} cells of {model.resolution} m, {model.heading_bins} "
@@ -193,11 +195,12 @@ class GridLocalizer(Node):
         estimate = self.localization.estimate(self._values["quality_radius"],
                                               math.radians(self._values["quality_angle"]))
         stamp_msg = (stamp or self.get_clock().now()).to_msg()
+        # The quality first: a monitor that shows it beside the pose then has it in time.
+        self._quality_pub.publish(Float64(data=estimate.quality))
         msg = pose_with_covariance(self._pose_msg, estimate.pose, estimate.covariance)
         msg.header.stamp = stamp_msg
         msg.header.frame_id = self._values["frame_id"]
         self._pose_pub.publish(msg)
-        self._quality_pub.publish(Float64(data=estimate.quality))
         self._belief_pub.publish(occupancy_grid(self.localization.belief_map(),
                                                 model.resolution, model.origin,
                                                 self._values["frame_id"], stamp_msg))

@@ -27,6 +27,7 @@ from estimation_nodes.nodes.grid_messages import fill_pose, occupancy_grid
 from estimation_nodes.nodes.parameters import ConfigurationError, declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.params import topics
 from estimation_nodes.params.maps import (
     MapError,
     odometry_noise,
@@ -73,13 +74,13 @@ class PlanarRobot(Node):
         self._kidnapped = False
         beams = values["beams"]
         self._angles = -math.pi + 2 * math.pi * np.arange(beams) / beams
-        map_pub = self.create_publisher(OccupancyGrid, "map", latched_qos(1))
+        map_pub = self.create_publisher(OccupancyGrid, topics.MAP, latched_qos(1))
         map_pub.publish(occupancy_grid(occupancy.cells, occupancy.resolution, occupancy.origin,
                                        "map", self.get_clock().now().to_msg()))
-        self._odom_pub = self.create_publisher(Odometry, "odom", 50)
-        self._scan_pub = self.create_publisher(LaserScan, "scan", 10)
-        self._truth_pub = self.create_publisher(PoseStamped, "true_pose", latched_qos(1))
-        self.create_subscription(Twist, "cmd_vel", self._on_cmd_vel, 10)
+        self._odom_pub = self.create_publisher(Odometry, topics.ODOM, 50)
+        self._scan_pub = self.create_publisher(LaserScan, topics.SCAN, 10)
+        self._truth_pub = self.create_publisher(PoseStamped, topics.TRUE_POSE, latched_qos(1))
+        self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, 10)
         self.create_timer(self._dt, self._step)
         self.get_logger().info(
             f"ready: map {occupancy.cells.shape[1]} x {occupancy.cells.shape[0]} cells, start "

@@ -62,8 +62,22 @@ class SensorField:
     max_distance: float = 2.0
 
 
+def find_map_file(name: str) -> Path:
+    """``name`` as given when it exists (absolute, or relative to the working folder),
+    otherwise one of the package's maps (``office.yaml``, ``maps/office.yaml``)."""
+    from estimation_nodes.params.installed import package_file
+
+    given = Path(name)
+    if given.is_file() or given.is_absolute():
+        return given
+    shipped = package_file(given.name if given.parent.name == "maps" else name, "maps")
+    return shipped if shipped is not None else given
+
+
 def read_map_file(path: Path) -> OccupancyMap:
-    """A map_server map (YAML + image) as an OccupancyMap."""
+    """A map_server map (YAML + image) as an OccupancyMap; a relative name not found from
+    the working folder is looked up among the package's maps."""
+    path = find_map_file(str(path))
     try:
         spec = yaml.safe_load(Path(path).read_text(encoding="utf-8"))
     except OSError as error:

@@ -265,6 +265,11 @@ GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
               read_only=True, min_value=0.0, max_value=100.0),
     ParamSpec("update_min_a", 0.2, "Rotation (rad) that triggers a filter update.",
               read_only=True, min_value=0.0, max_value=10.0),
+    ParamSpec("kidnap_probability", 1e-6, "Probability per update that the robot was "
+              "carried anywhere: that much of the belief is spread uniformly over the free "
+              "cells before each correction, so a kidnapped robot is found again by its scans "
+              "alone (0: the exact filter; ~/global_localization recovers).", read_only=True,
+              min_value=0.0, max_value=0.5),
     ParamSpec("max_odom_jump", 1.0, "An odometry step longer than this (m) is a jump: "
               "dropped, counted, and the odometry followed from the new pose.",
               read_only=True, min_value=0.01, max_value=1000.0),

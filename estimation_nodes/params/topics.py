@@ -59,3 +59,25 @@ SIMULATOR_OUTPUTS = {
     "tile_sensor": (TRUE_POSITION, TILE_OBSERVATION, POSITION_MEASUREMENT),
     "linear_system": (TRUE_STATE, KALMAN_MEASUREMENT),
 }
+
+# Grid localization on a map (grid_localizer, planar_robot): the names nav2 uses.
+MAP = "map"
+SCAN = "scan"
+ODOM = "odom"
+INITIAL_POSE = "initialpose"
+POSE = "pose"
+BELIEF_MAP = "belief_map"
+LOCALIZATION_QUALITY = "localization_quality"
+TRUE_POSE = "true_pose"
+CMD_VEL = "cmd_vel"
+
+#: Every topic of a grid localization run: relative name -> ROS type.
+GRID_TOPIC_TYPES = {
+    MAP: "nav_msgs/msg/OccupancyGrid",
+    SCAN: "sensor_msgs/msg/LaserScan",
+    ODOM: "nav_msgs/msg/Odometry",
+    TRUE_POSE: "geometry_msgs/msg/PoseStamped",
+    POSE: "geometry_msgs/msg/PoseWithCovarianceStamped",
+    BELIEF_MAP: "nav_msgs/msg/OccupancyGrid",
+    LOCALIZATION_QUALITY: "std_msgs/msg/Float64",
+}

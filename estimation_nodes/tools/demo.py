@@ -22,7 +22,7 @@ import yaml
 
 from estimation_nodes.params import topics
 from estimation_nodes.params.files import check_params_file
-from estimation_nodes.tools.graph_runtime import spin_until, stop_process
+from estimation_nodes.tools.graph_runtime import run_until_done, spin_until, stop_process
 from estimation_nodes.tools.installed import share_dirs
 from estimation_nodes.tools.live_view import LiveViewError, parse_address
 from estimation_nodes.tools.recording import RecordingError
@@ -68,11 +68,15 @@ def find_scenario(name: str) -> Path:
 
 
 def simulator_for(params: Path) -> str:
-    """The simulated world a parameter file is for: linear_system when the file has a
-    section for it (a matrix Kalman scenario), otherwise the tile world's tile_sensor."""
+    """The simulated world a parameter file is for: planar_robot or linear_system when the
+    file has a section for it (grid localization on a map, a matrix Kalman scenario),
+    otherwise the tile world's tile_sensor."""
     document = yaml.safe_load(params.read_text(encoding="utf-8")) or {}
     names = {str(key).rstrip("/").rsplit("/", 1)[-1] for key in document}
-    return "linear_system" if "linear_system" in names else "tile_sensor"
+    for simulator in ("planar_robot", "linear_system"):
+        if simulator in names:
+            return simulator
+    return "tile_sensor"
 
 
 def known_scenarios() -> list[str]:
@@ -153,6 +157,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     env = ros_environment()
     os.environ.update(env)
     print(f"estimation_demo: parameters from {params}")
+    if simulator_for(params) == "planar_robot":
+        sys.exit(run_grid_scenario(params, args))
     runner = run_in_process if args.in_process else run_processes
     try:
         code, record = runner(params, args)
@@ -188,15 +194,44 @@ def resolved(topic_types: dict[str, str]) -> dict[str, str]:
             for topic, name in topic_types.items()}
 
 
-def make_sinks(params: Path, args: argparse.Namespace) -> list:
+def run_grid_scenario(params: Path, args: argparse.Namespace) -> int:
+    """A grid localization run (tools/grid_demo.py); its exit code."""
+    from estimation_nodes.tools import grid_demo
+
+    if args.in_process or args.plot:
+        print("estimation_demo: --in-process and --plot are not available for grid "
+              "localization runs yet", file=sys.stderr)
+        return 2
+    grid_topics = resolved(topics.GRID_TOPIC_TYPES)
+    try:
+        sinks = make_sinks(params, args, grid_topics,
+                           {**grid_topics, topics.DIAGNOSTICS: topics.LIVE_TOPIC_TYPES[
+                               topics.DIAGNOSTICS]})
+    except (RecordingError, LiveViewError) as error:
+        print(f"estimation_demo: {error}", file=sys.stderr)
+        return 2
+    try:
+        code, record = grid_demo.run(params, args, sinks)
+    finally:
+        close_sinks(sinks)
+    print(record.summary())
+    print(other_scenarios(params))
+    if args.record:
+        print(f"estimation_demo: recorded to {args.record}")
+    return code
+
+
+def make_sinks(params: Path, args: argparse.Namespace, recorded: dict[str, str] | None = None,
+               served: dict[str, str] | None = None) -> list:
     """Where the monitor writes raw messages: the Foxglove live view (--foxglove), the MCAP
-    file (--record). The live view starts first: a port in use fails before a file is made."""
+    file (--record); by default with the tile and Kalman topics. The live view starts
+    first: a port in use fails before a file is made."""
     sinks: list = []
     try:
         if args.foxglove:
             from estimation_nodes.tools.live_view import LiveView
 
-            view = LiveView(*args.foxglove, resolved(topics.LIVE_TOPIC_TYPES))
+            view = LiveView(*args.foxglove, served or resolved(topics.LIVE_TOPIC_TYPES))
             sinks.append(view)
             print(f"estimation_demo: Foxglove live view on {view.url} (in Foxglove: Open "
                   f"connection, Foxglove WebSocket)", flush=True)
@@ -205,7 +240,8 @@ def make_sinks(params: Path, args: argparse.Namespace) -> list:
 
             metadata = {"parameters_yaml": params.read_text(encoding="utf-8"),
                         "parameters_file": str(params)}
-            sinks.append(McapRunWriter(args.record, resolved(topics.TOPIC_TYPES), metadata))
+            sinks.append(McapRunWriter(args.record, recorded or resolved(topics.TOPIC_TYPES),
+                                       metadata))
     except Exception:
         close_sinks(sinks)
         raise
@@ -268,20 +304,7 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
             # alone, which stops each child with exactly one SIGINT.
             processes[name] = subprocess.Popen(
                 command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())}, process_group=0)
-        commander = processes.get("motion_commander")
-        finished = commander is None or spin_until(executor, lambda: any(p.poll() is not None
-                                                    for p in processes.values()),
-                              deadline - time.monotonic())
-        failed = {n: p.returncode for n, p in processes.items()
-                  if p.poll() is not None and p.returncode != 0}
-        if not finished:
-            print("estimation_demo: stopped early: --timeout reached", file=sys.stderr)
-            code = 1
-        elif failed or commander is None or commander.poll() is None:
-            print(f"estimation_demo: stopped early: exit codes {failed}", file=sys.stderr)
-            code = 2 if 2 in failed.values() else 1   # 2: a node's parameter was invalid
-        else:
-            spin_until(executor, lambda: False, args.linger)
+        code = run_until_done(executor, processes, "motion_commander", deadline, args.linger)
     except KeyboardInterrupt:
         print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
         code = 130

@@ -30,3 +30,26 @@ def stop_process(process: subprocess.Popen, grace: float = 5.0) -> int:
             process.kill()
             process.wait()
     return process.returncode
+
+
+def run_until_done(executor: Any, processes: dict[str, subprocess.Popen], main: str,
+                   deadline: float, linger: float) -> int:
+    """Spin until a child ends; the run's exit code: 0 when ``main`` ended well (then spin
+    ``linger`` s more), 1 on a timeout or an error, 2 when a node's parameter was invalid.
+    Says why on stderr."""
+    import sys
+
+    process = processes.get(main)
+    finished = process is None or spin_until(
+        executor, lambda: any(p.poll() is not None for p in processes.values()),
+        deadline - time.monotonic())
+    failed = {n: p.returncode for n, p in processes.items()
+              if p.poll() is not None and p.returncode != 0}
+    if not finished:
+        print("estimation_demo: stopped early: --timeout reached", file=sys.stderr)
+        return 1
+    if failed or process is None or process.poll() is None:
+        print(f"estimation_demo: stopped early: exit codes {failed}", file=sys.stderr)
+        return 2 if 2 in failed.values() else 1
+    spin_until(executor, lambda: False, linger)
+    return 0

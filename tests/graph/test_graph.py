@@ -27,7 +27,8 @@ from tests.graph.graph_tools import (
 )
 
 EXECUTABLES = ("motion_commander", "tile_sensor", "linear_system", "estimator", "estimation_demo",
-               "estimation_replay", "estimation_plot")
+               "estimation_replay", "estimation_plot", "foxglove_view", "grid_localizer",
+               "planar_robot")
 
 
 def test_ros2_run_finds_every_executable():
@@ -43,7 +44,9 @@ def test_ros2_run_finds_every_executable():
 
     assert parse_package(str(share / "package.xml")).name == "estimation_nodes"
     assert {p.name for p in (share / "msgs_config").glob("*.yaml")} >= {
-        "book_world.yaml", "example_6_14.yaml", "example_6_18.yaml"}
+        "book_world.yaml", "example_6_14.yaml", "example_6_18.yaml", "grid_localization.yaml"}
+    assert {p.name for p in (share / "maps").iterdir()} >= {
+        "office.yaml", "office.pgm", "corridor.yaml", "corridor.pgm"}
 
 
 def test_source_package_xml_parses():

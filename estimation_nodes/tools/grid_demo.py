@@ -1,0 +1,162 @@
+"""The demo's grid localization run: planar_robot and grid_localizer, watched and summarized.
+
+Started by estimation_demo for a scenario with a ``planar_robot`` section
+(msgs_config/grid_localization.yaml). The localizer starts first, then the
+simulated robot, which ends itself after its ``duration``; a monitor here
+prints each update (the estimate's error to the truth at the scan's time,
+the localization quality, the belief's entropy from /diagnostics) and a
+summary, and records every topic with ``--record``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from estimation_nodes.params import topics
+from estimation_nodes.tools.graph_runtime import run_until_done, stop_process
+
+NODE_MODULES = {"grid_localizer": "estimation_nodes.nodes.grid_localizer",
+                "planar_robot": "estimation_nodes.nodes.planar_robot"}
+#: Within this of the truth an update counts as localized (the issue's 0.3 m and 10 deg).
+NEAR_M, NEAR_DEG = 0.3, 10.0
+
+
+@dataclass
+class GridRecord:
+    """Each update: (seconds since start, error m, error deg, quality, entropy bits)."""
+
+    updates: list[tuple[float, float, float, float, float]] = field(default_factory=list)
+
+    def summary(self) -> str:
+        lines = ["", "summary:", f"  localizer updates {len(self.updates)}"]
+        if not self.updates:
+            return "\n".join(lines)
+        near = [e <= NEAR_M and a <= NEAR_DEG for _, e, a, _, _ in self.updates]
+        first = next((t for (t, *_), ok in zip(self.updates, near) if ok), None)
+        _, error, angle, quality, _ = self.updates[-1]
+        lines += [f"  within {NEAR_M} m and {NEAR_DEG:g} deg of the truth in {sum(near)} of "
+                  f"{len(near)} updates" + (f", first at {first:.1f} s" if first else ""),
+                  f"  quality at the first update {self.updates[0][3]:.3f}, at the last "
+                  f"{quality:.3f}",
+                  f"  final error {error:.3f} m, {angle:.1f} deg"]
+        return "\n".join(lines)
+
+
+def grid_topic_types() -> dict[str, str]:
+    return {f"/{t}" if not t.startswith("/") else t: n for t, n in topics.GRID_TOPIC_TYPES.items()}
+
+
+class GridMonitor:
+    """Subscribes to the run's grid topics; prints and keeps each update; feeds raw sinks."""
+
+    def __init__(self, quiet: bool, sinks: list) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+        from rclpy.node import Node
+        from std_msgs.msg import Float64
+
+        from estimation_nodes.nodes.qos import latched_qos
+
+        self.node = Node("estimation_demo_grid_monitor")
+        self.record = GridRecord()
+        self._quiet, self._sinks = quiet, sinks
+        self._truth: dict[tuple[int, int], tuple[float, float, float]] = {}
+        self._quality = float("nan")
+        self._entropy = float("nan")
+        self._started = time.monotonic()
+        self.node.create_subscription(PoseStamped, topics.TRUE_POSE, self._on_truth,
+                                      latched_qos(1000))
+        self.node.create_subscription(PoseWithCovarianceStamped, topics.POSE, self._on_pose,
+                                      latched_qos(1000))
+        self.node.create_subscription(Float64, topics.LOCALIZATION_QUALITY,
+                                      lambda m: setattr(self, "_quality", m.data),
+                                      latched_qos(1000))
+        self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS,
+                                      self._on_diagnostics, 10)
+        if sinks:
+            self._raw_subscriptions()
+
+    def _raw_subscriptions(self) -> None:
+        from estimation_nodes.tools.monitor import message_class, observer_qos
+
+        for topic, type_name in grid_topic_types().items():
+            qos = 10 if topic in ("/scan", "/odom") else observer_qos(topic)
+            self.node.create_subscription(message_class(type_name), topic,
+                                          self._forward(topic), qos, raw=True)
+
+    def _forward(self, topic: str):
+        def on_raw(data: bytes, info: dict) -> None:
+            received = time.time_ns()
+            for sink in self._sinks:
+                sink.write(topic, data, received, info.get("source_timestamp") or received)
+        return on_raw
+
+    def _on_truth(self, msg) -> None:
+        from estimation_nodes.nodes.grid_messages import planar_pose
+
+        self._truth[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = planar_pose(msg.pose)
+
+    def _on_diagnostics(self, msg) -> None:
+        for status in msg.status:
+            for pair in status.values:
+                if pair.key == "belief_entropy_bits":
+                    self._entropy = float(pair.value)
+
+    def _on_pose(self, msg) -> None:
+        from estimation_nodes.nodes.grid_messages import planar_pose
+
+        truth = self._truth.get((msg.header.stamp.sec, msg.header.stamp.nanosec))
+        if truth is None:
+            return                     # before the robot moved: no truth for that time
+        x, y, yaw = planar_pose(msg.pose.pose)
+        error = math.hypot(x - truth[0], y - truth[1])
+        angle = abs(math.degrees(math.remainder(yaw - truth[2], 2 * math.pi)))
+        elapsed = time.monotonic() - self._started
+        self.record.updates.append((elapsed, error, angle, self._quality, self._entropy))
+        if not self._quiet:
+            print(f"t {elapsed:5.1f} s  update {len(self.record.updates):3d}  pose ({x:6.2f}, "
+                  f"{y:6.2f}, {math.degrees(yaw):6.1f} deg)  error {error:5.2f} m "
+                  f"{angle:5.1f} deg  quality {self._quality:.3f}  entropy "
+                  f"{self._entropy:.1f} bits", flush=True)
+
+
+def run(params: Path, args, sinks: list) -> tuple[int, GridRecord]:
+    """Start the localizer and the robot, watch until the robot's duration is over."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from estimation_nodes.nodes.process import PARENT_PID_ENV, ignore_further_interrupts
+
+    processes: dict[str, subprocess.Popen] = {}
+    rclpy.init()
+    executor = SingleThreadedExecutor()
+    monitor = GridMonitor(args.quiet, sinks)
+    executor.add_node(monitor.node)
+    code = 0
+    try:
+        deadline = time.monotonic() + args.timeout
+        for name in ("grid_localizer", "planar_robot"):
+            command = [sys.executable, "-m", NODE_MODULES[name], "--ros-args",
+                       "--params-file", str(params)]
+            if name == "planar_robot":
+                command += ["-p", "exit_when_done:=true"]
+            processes[name] = subprocess.Popen(
+                command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())}, process_group=0)
+        code = run_until_done(executor, processes, "planar_robot", deadline, args.linger)
+    except KeyboardInterrupt:
+        print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
+        code = 130
+    finally:
+        ignore_further_interrupts()
+        for process in reversed(processes.values()):
+            stop_process(process)
+        monitor.node.destroy_node()
+        executor.shutdown()
+        rclpy.try_shutdown()
+    return code, monitor.record

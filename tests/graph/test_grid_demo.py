@@ -1,0 +1,50 @@
+"""estimation_demo --scenario grid_localization: the robot found without an initial pose."""
+
+import re
+import subprocess
+
+import pytest
+import yaml
+from mcap.reader import make_reader
+
+from tests.conftest import SCENARIOS
+from tests.graph.graph_tools import executable
+
+
+@pytest.mark.timeout(180)
+def test_the_grid_demo_finds_the_robot_and_records_the_run(ros_env, tmp_path):
+    # The shipped scenario, shorter: 14 s of wandering, kidnapped at 8 s.
+    document = yaml.safe_load((SCENARIOS / "grid_localization.yaml").read_text())
+    document["/**/planar_robot"]["ros__parameters"].update(duration=14.0, kidnap_after=8.0)
+    params = tmp_path / "grid.yaml"
+    params.write_text(yaml.safe_dump(document))
+    recording = tmp_path / "grid.mcap"
+    demo = subprocess.run([executable("estimation_demo"), "--params-file", str(params),
+                           "--record", str(recording), "--linger", "0.5"], env=ros_env,
+                          capture_output=True, text=True, timeout=150)
+    print(demo.stdout[-3000:])
+    assert demo.returncode == 0, demo.stdout + demo.stderr
+    near, updates = (int(v) for v in re.search(
+        r"within 0\.3 m and 10 deg of the truth in (\d+) of (\d+) updates", demo.stdout).groups())
+    assert updates >= 10 and near / updates >= 0.8
+    last_quality = float(re.search(r"at the last (\d\.\d+)", demo.stdout).group(1))
+    assert last_quality > 0.9
+    with recording.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    channels = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}
+    assert channels["/scan"] == "sensor_msgs/msg/LaserScan"
+    assert channels["/belief_map"] == "nav_msgs/msg/OccupancyGrid"
+    counts = summary.statistics.channel_message_counts
+    by_topic = {summary.channels[i].topic: n for i, n in counts.items()}
+    assert by_topic["/pose"] >= updates and by_topic["/odom"] >= 100
+
+
+def test_a_bad_map_ends_the_localizer_with_one_line(ros_env, tmp_path):
+    (tmp_path / "map.yaml").write_text("image: missing.pgm\nresolution: 0.05\n"
+                                       "origin: [0.0, 0.0, 0.0]\n")
+    result = subprocess.run([executable("grid_localizer"), "--ros-args", "-p",
+                             f"map_file:={tmp_path / 'map.yaml'}"], env=ros_env,
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2
+    lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
+    assert len(lines) == 1 and "image" in lines[0] and "does not exist" in lines[0], lines
