@@ -18,6 +18,8 @@ as motion, and odometry is followed from the new pose. A step that fails
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +28,8 @@ from estimation_nodes.core import grid
 from estimation_nodes.core.models import FloatArray
 
 Pose = tuple[float, float, float]
+#: Odometry poses kept to find the one of a scan's time (at 50 Hz, 4 s).
+ODOMETRY_HISTORY = 200
 
 
 @dataclass(frozen=True)
@@ -56,6 +60,8 @@ class GridLocalization:
         #: The odometry pose at the last update (None: no update yet) and the latest one.
         self._reference: Pose | None = None
         self._latest: Pose | None = None
+        #: (stamp ns, pose) of recent odometry, oldest first, for the pose at a scan's time.
+        self._history: deque[tuple[int, Pose]] = deque(maxlen=ODOMETRY_HISTORY)
         self.updates = 0
 
     def global_localization(self) -> None:
@@ -67,44 +73,67 @@ class GridLocalization:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
         self.belief = grid.gaussian_prior(self.model, *pose, covariance)
 
-    def on_odometry(self, pose: Pose) -> bool:
+    def on_odometry(self, pose: Pose, stamp_ns: int | None = None) -> bool:
         """Follow odometry; False when the step was a jump (not taken as motion)."""
         latest = self._latest
-        self._latest = pose
         if latest is not None and math.hypot(pose[0] - latest[0],
                                              pose[1] - latest[1]) > self._max_jump:
             # What was moved before the jump is lost with it; follow on from here.
+            self._history.clear()
+            self._latest = pose
             if self._reference is not None:
                 self._reference = pose
+            self._remember(pose, stamp_ns)
             return False
+        self._latest = pose
+        self._remember(pose, stamp_ns)
         return True
 
-    def due(self) -> bool:
-        """Whether the next scan updates the filter: the first once odometry is there,
-        later ones after enough motion."""
-        if self._latest is None:
+    def _remember(self, pose: Pose, stamp_ns: int | None) -> None:
+        if stamp_ns is not None and (not self._history or stamp_ns >= self._history[-1][0]):
+            self._history.append((stamp_ns, pose))
+
+    def odometry_covers(self, stamp_ns: int) -> bool:
+        """Whether odometry up to ``stamp_ns`` (a scan's time) has come in."""
+        return bool(self._history) and self._history[-1][0] >= stamp_ns
+
+    def _odometry_at(self, stamp_ns: int | None) -> Pose | None:
+        """The latest odometry pose at or before ``stamp_ns`` (the latest one, without)."""
+        if stamp_ns is None or not self._history:
+            return self._latest
+        index = bisect_right([stamp for stamp, _ in self._history], stamp_ns)
+        return self._history[index - 1][1] if index else None
+
+    def due(self, stamp_ns: int | None = None) -> bool:
+        """Whether a scan taken at ``stamp_ns`` updates the filter: the first once odometry
+        is there, later ones after enough motion since the last update."""
+        pose = self._odometry_at(stamp_ns)
+        if pose is None:
             return False
         if self._reference is None:
             return True
-        dx = self._latest[0] - self._reference[0]
-        dy = self._latest[1] - self._reference[1]
-        turned = abs(math.remainder(self._latest[2] - self._reference[2], 2 * math.pi))
+        dx = pose[0] - self._reference[0]
+        dy = pose[1] - self._reference[1]
+        turned = abs(math.remainder(pose[2] - self._reference[2], 2 * math.pi))
         return math.hypot(dx, dy) >= self._min_d or turned >= self._min_a
 
-    def update(self, ranges: FloatArray, angles: FloatArray) -> None:
-        """Predict with the odometry since the last update, correct with the scan."""
-        if self._latest is None:
+    def update(self, ranges: FloatArray, angles: FloatArray,
+               stamp_ns: int | None = None) -> None:
+        """Predict with the odometry from the last update to the scan's time, correct with
+        the scan."""
+        pose = self._odometry_at(stamp_ns)
+        if pose is None:
             raise ValueError("no odometry yet: the motion since the last update is unknown")
         belief = self.belief
         if self._reference is not None:
-            delta = grid.odometry_delta(self._reference, self._latest)
+            delta = grid.odometry_delta(self._reference, pose)
             belief = grid.predict(belief, self.model, delta, self.noise)
         if self._uniform is not None:
             # The robot may have been carried anywhere: a little of the belief everywhere,
             # so a kidnapped robot is found again by the scans alone.
             belief = (1.0 - self._kidnap) * belief + self._kidnap * self._uniform
         self.belief, self.log_evidence = grid.correct_scan(belief, self.model, ranges, angles)
-        self._reference = self._latest
+        self._reference = pose
         self.updates += 1
 
     def estimate(self, radius: float, angle: float) -> Estimate:

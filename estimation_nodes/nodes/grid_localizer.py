@@ -51,6 +51,9 @@ from estimation_nodes.params.maps import (
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS
 
 WARN_THROTTLE_S = 5.0
+#: How long a scan waits for the odometry of its time (as tf's message filter waits for a
+#: transform); after that it is used with the latest odometry before it.
+SCAN_WAIT_S = 0.2
 
 
 class GridLocalizer(Node):
@@ -86,6 +89,9 @@ class GridLocalizer(Node):
         self.create_service(Trigger, "~/global_localization", self._on_global_localization)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(self._values["diagnostics_period"], self._publish_diagnostics)
+        #: A scan waiting for the odometry of its time: (message, stamp ns, deadline).
+        self._waiting_scan: tuple[LaserScan, int | None, float] | None = None
+        self.create_timer(SCAN_WAIT_S / 4, self._scan_waited_out)
 
     def _start(self, model: grid.GridModel) -> None:
         self.localization = GridLocalization(
@@ -122,11 +128,21 @@ class GridLocalizer(Node):
             return
         if self.localization is None:
             return
-        if not self.localization.on_odometry(pose):
+        if not self.localization.on_odometry(pose, _stamp_ns(msg.header.stamp)):
             self._reject("odom_jump", f"odom jumped more than {self._values['max_odom_jump']} m:"
                          " not taken as motion; followed from the new pose")
             return
         self.handled["odom"] += 1
+        waiting = self._waiting_scan
+        if waiting is not None and self.localization.odometry_covers(waiting[1] or 0):
+            self._waiting_scan = None
+            self._use_scan(waiting[0], waiting[1])
+
+    def _scan_waited_out(self) -> None:
+        waiting = self._waiting_scan
+        if waiting is not None and time.monotonic() > waiting[2]:
+            self._waiting_scan = None
+            self._use_scan(waiting[0], waiting[1])
 
     def _on_scan(self, msg: LaserScan) -> None:
         if self.localization is None:
@@ -136,7 +152,19 @@ class GridLocalizer(Node):
             self._reject("bad_scan", f"scan dropped: angle_increment {msg.angle_increment}, "
                          f"angle_min {msg.angle_min}")
             return
-        if not self.localization.due():
+        stamp = _stamp_ns(msg.header.stamp)
+        if stamp is not None and not self.localization.odometry_covers(stamp):
+            # The odometry of the scan's time is still on its way (another topic): wait for
+            # it, so the update does not depend on which came first.
+            if self._waiting_scan is not None:
+                self.handled["scan_superseded"] += 1
+            self._waiting_scan = (msg, stamp, time.monotonic() + SCAN_WAIT_S)
+            return
+        self._use_scan(msg, stamp)
+
+    def _use_scan(self, msg: LaserScan, stamp: int | None) -> None:
+        assert self.localization is not None
+        if not self.localization.due(stamp):
             self.handled["scan_without_motion"] += 1
             return
         max_range = min(msg.range_max, self._settings.sensor.max_range) \
@@ -148,7 +176,7 @@ class GridLocalizer(Node):
             self.rejected["nan_ranges"] += nan
         started = time.perf_counter()
         try:
-            self.localization.update(ranges, angles)
+            self.localization.update(ranges, angles, stamp)
         except grid.ZeroEvidenceError as error:
             self._reject("zero_evidence", f"scan dropped: {error}")
             return
@@ -242,7 +270,14 @@ class GridLocalizer(Node):
         self._diagnostics_pub.publish(array)
 
 
+def _stamp_ns(stamp) -> int | None:
+    """A header stamp in ns; None for an unset (zero) one."""
+    value = stamp.sec * 1_000_000_000 + stamp.nanosec
+    return value or None
+
+
 main = main_for(GridLocalizer)
 
 if __name__ == "__main__":
     main()
+

@@ -212,6 +212,8 @@ def main(argv: list[str] | None = None) -> None:
                         help="estimator parameters (default: those stored in the recording)")
     parser.add_argument("--tolerance", type=float, default=1e-9)
     args = parser.parse_args(argv)
+    if args.recording.is_file() and _is_grid(args.recording):
+        sys.exit(_main_grid(args))
     try:
         recording = read_recording(args.recording)
         if args.params_file:
@@ -235,6 +237,35 @@ def main(argv: list[str] | None = None) -> None:
     verdict = "EQUAL" if comparison.equal else f"DIFFERENT ({len(comparison.differences)})"
     print(f"online vs offline to {args.tolerance:g}: {verdict}")
     sys.exit(0 if comparison.equal else 1)
+
+
+def _is_grid(path: Path) -> bool:
+    from estimation_nodes.tools.grid_replay import is_grid_recording
+
+    try:
+        return is_grid_recording(path)
+    except Exception:               # not MCAP at all: read_recording says so in one line
+        return False
+
+
+def _main_grid(args: argparse.Namespace) -> int:
+    """The grid localizer's replay (tools/grid_replay.py); its exit code."""
+    from estimation_nodes.tools.grid_replay import replay_grid
+
+    try:
+        parameters_yaml = check_params_file(args.params_file).read_text(encoding="utf-8") \
+            if args.params_file else None
+        comparison = replay_grid(args.recording, parameters_yaml, args.tolerance)
+    except (RecordingError, ValueError) as error:
+        print(f"estimation_replay: {error}", file=sys.stderr)
+        return 2
+    print(f"pose: {comparison.compared} updates compared, largest differences "
+          + ", ".join(f"{k} {v:.3g}" for k, v in comparison.worst.items()))
+    for line in comparison.differences[:20]:
+        print(line)
+    verdict = "EQUAL" if comparison.equal else f"DIFFERENT ({len(comparison.differences)})"
+    print(f"online vs offline to {args.tolerance:g}: {verdict}")
+    return 0 if comparison.equal else 1
 
 
 if __name__ == "__main__":

@@ -42,15 +42,15 @@ def nodes(context, executor):
 
 def test_the_localizer_finds_the_simulated_robot_without_an_initial_pose(nodes, executor,
                                                                          collector_factory):
-    nodes(PlanarRobot, map_file=CORRIDOR, seed=3, rate_hz=20.0)
     localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=36)
     seen = collector_factory({"pose": PoseWithCovarianceStamped,
                               "true_pose": (PoseStamped, latched_qos(1000)),
                               "localization_quality": Float64,
                               "belief_map": OccupancyGrid})
-    first_quality = []
-    seen.node.create_subscription(Float64, "localization_quality",
-                                  lambda m: first_quality.append(m.data), latched_qos(1))
+    # Before the robot moves: the belief uniform over the corridor, the quality low.
+    assert spin_until(executor, lambda: seen.count("localization_quality") >= 1, 10.0)
+    first_quality = [seen.messages["localization_quality"][0].data]
+    nodes(PlanarRobot, map_file=CORRIDOR, seed=3, rate_hz=20.0)
     assert spin_until(executor, lambda: localizer.localization is not None
                       and localizer.localization.updates >= 15, 60.0)
     # The truth when the last scan used was taken: the pose carries that scan's stamp.

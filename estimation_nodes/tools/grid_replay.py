@@ -1,0 +1,148 @@
+"""estimation_replay for grid localization runs: the localizer offline over the recorded inputs.
+
+The recorded map (the first ``/map`` message) and the localizer's recorded
+parameters give the same state grid; odometry and scans are applied in the
+order of their header stamps, each scan with the odometry of its time, as
+grid_localizer does. The first update is the one the online localizer made
+first (it starts from the uniform belief, so what came before it does not
+matter). Every online update (a ``pose`` stamped with its scan's time, and
+the ``localization_quality`` published just before it) is compared with the
+offline one of the same scan: the pose, the (x, y, yaw) covariance and the
+quality.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from estimation_nodes.core.grid_state import GridLocalization
+from estimation_nodes.params import topics
+from estimation_nodes.params.files import read_node_parameters
+from estimation_nodes.params.maps import (
+    build_grid_localizer_settings,
+    occupancy_from_message,
+)
+from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults
+from estimation_nodes.tools.recording import RecordingError
+
+
+@dataclass
+class GridComparison:
+    compared: int = 0
+    worst: dict[str, float] = field(default_factory=dict)
+    differences: list[str] = field(default_factory=list)
+
+    @property
+    def equal(self) -> bool:
+        return not self.differences and self.compared > 0
+
+
+def is_grid_recording(path: Path) -> bool:
+    from mcap.reader import make_reader
+
+    with path.open("rb") as stream:
+        summary = make_reader(stream).get_summary()
+    return summary is not None and any(c.topic == f"/{topics.SCAN}"
+                                       for c in summary.channels.values())
+
+
+def _messages(path: Path) -> tuple[list[tuple[str, object]], dict[str, str]]:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    with path.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        decoded = [(m.publish_time, m.log_time, c.topic, d)
+                   for _s, c, m, d in reader.iter_decoded_messages(log_time_order=True)]
+        metadata = next((dict(e.metadata) for e in reader.iter_metadata()
+                         if e.name == "estimation_nodes"), {})
+    decoded.sort(key=lambda item: item[:2])
+    return [(topic, message) for _p, _l, topic, message in decoded], metadata
+
+
+def _stamp(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+def _pose(pose) -> tuple[float, float, float]:
+    """(x, y, yaw) of a geometry_msgs Pose."""
+    q = pose.orientation
+    return (pose.position.x, pose.position.y,
+            math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
+
+
+def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> GridComparison:
+    from estimation_nodes.nodes.grid_messages import scan_beams
+
+    messages, metadata = _messages(path)
+    values = spec_defaults(GRID_LOCALIZER_SPECS)
+    values.update(read_node_parameters(parameters_yaml if parameters_yaml is not None
+                                       else metadata.get("parameters_yaml", ""),
+                                       "/grid_localizer"))
+    values["map_file"] = ""                  # the recorded map, as the localizer saw it
+    settings = build_grid_localizer_settings(values)
+    maps = [m for t, m in messages if t == f"/{topics.MAP}"]
+    if not maps:
+        raise RecordingError(f"{path}: no /map message recorded")
+    info = maps[0].info
+    occupancy = occupancy_from_message(info.width, info.height, info.resolution,
+                                       (info.origin.position.x, info.origin.position.y, 0.0),
+                                       maps[0].data)
+    localization = GridLocalization(settings.model_for(occupancy), settings.noise,
+                                    values["update_min_d"], values["update_min_a"],
+                                    values["max_odom_jump"], values["kidnap_probability"])
+    online, quality = {}, float("nan")
+    for topic, msg in messages:
+        if topic == f"/{topics.LOCALIZATION_QUALITY}":
+            quality = msg.data
+        elif topic == f"/{topics.POSE}":
+            online[_stamp(msg)] = (msg, quality)
+    inputs = sorted([(_stamp(m), 0, t, m) for t, m in messages
+                     if t == f"/{topics.ODOM}"] +
+                    [(_stamp(m), 1, t, m) for t, m in messages if t == f"/{topics.SCAN}"],
+                    key=lambda item: item[:2])
+    comparison = GridComparison()
+    started = False
+    radius, angle = values["quality_radius"], math.radians(values["quality_angle"])
+    for stamp, _rank, topic, msg in inputs:
+        if topic == f"/{topics.ODOM}":
+            localization.on_odometry(_pose(msg.pose.pose), stamp)
+            continue
+        if not started and stamp not in online:
+            continue                          # before the localizer's first update
+        started = True
+        if not localization.due(stamp):
+            continue
+        max_range = min(msg.range_max, settings.sensor.max_range) \
+            if math.isfinite(msg.range_max) and msg.range_max > 0 else settings.sensor.max_range
+        ranges, angles, _ = scan_beams(msg.ranges, msg.angle_min, msg.angle_increment,
+                                       msg.range_min, max_range, values["max_beams"])
+        localization.update(ranges, angles, stamp)
+        _compare(comparison, stamp, online.get(stamp), localization.estimate(radius, angle),
+                 tolerance)
+    return comparison
+
+
+def _compare(comparison: GridComparison, stamp: int, online, offline, tolerance: float) -> None:
+    comparison.compared += 1
+    if online is None:
+        comparison.differences.append(f"update at {stamp / 1e9:.3f} s: computed offline, "
+                                      f"not published online")
+        return
+    msg, quality = online
+    pose = np.array(_pose(msg.pose.pose))
+    offline_pose = np.array(offline.pose)
+    yaw_error = abs(math.remainder(pose[2] - offline_pose[2], 2 * math.pi))
+    covariance = np.array(msg.pose.covariance).reshape(6, 6)[np.ix_((0, 1, 5), (0, 1, 5))]
+    errors = {"pose": max(float(np.max(np.abs(pose[:2] - offline_pose[:2]))), yaw_error),
+              "covariance": float(np.max(np.abs(covariance - offline.covariance))),
+              "quality": abs(quality - offline.quality)}
+    for name, error in errors.items():
+        comparison.worst[name] = max(comparison.worst.get(name, 0.0), error)
+        if not error <= tolerance:
+            comparison.differences.append(
+                f"update at {stamp / 1e9:.3f} s: {name} |online - offline| = {error:.3g}")
