@@ -19,6 +19,10 @@ from tests.conftest import REPO, SCENARIOS
 from tests.graph.graph_tools import node_command
 from tests.graph.test_two_hosts import compared, replayed
 
+#: The recorder's node (tests/graph/record_run.py runs the demo's monitor).
+RECORDER = "estimation_demo_monitor"
+RECORDED = f"[estimator, {RECORDER}]"
+RECORDED_AND_SENSOR = f"[estimator, tile_sensor, {RECORDER}]"
 SPIN = "import time\nend = time.monotonic() + 120\nwhile time.monotonic() < end: pass\n"
 
 
@@ -32,10 +36,13 @@ def test_seeded_run_under_cpu_load_equals_the_causal_filter(processes, tmp_path)
         recorder = processes([sys.executable, "-m", "tests.graph.record_run", str(recording),
                               str(scenario)], cwd=REPO)
         assert "recording" in recorder.stdout.readline()
-        processes(node_command("tile_sensor", scenario))
+        # The recorder must get every input too: the sensor and the commander wait for it
+        # as they wait for the estimator.
+        processes(node_command("tile_sensor", scenario, "-p", f"hold_for_nodes:={RECORDED}"))
         commander = processes(node_command(
             "motion_commander", scenario, "-p", "start_delay:=0.5", "-p",
-            "exit_when_done:=true", "-p", "rate_hz:=10.0"))
+            "exit_when_done:=true", "-p", "rate_hz:=10.0", "-p",
+            f"required_nodes:={RECORDED_AND_SENSOR}"))
         estimator = processes(node_command("estimator", scenario,
                                            "-p", "history_depth:=1000"))
         assert commander.wait(timeout=120) == 0, commander.stdout.read()

@@ -27,6 +27,10 @@ from tests.graph.graph_tools import executable, node_command
 pytestmark = pytest.mark.skipif(hosts.available() is not None,
                                 reason=str(hosts.available()))
 
+#: The recorder's node (tests/graph/record_run.py runs the demo's monitor).
+RECORDER = "estimation_demo_monitor"
+RECORDED = f"[estimator, {RECORDER}]"
+RECORDED_AND_SENSOR = f"[estimator, tile_sensor, {RECORDER}]"
 BOOK_FINAL_BELIEF = [0.048443, 0.063322, 0.244983, 0.528374, 0.114879]
 #: The outputs keep a history deep enough for a remote subscriber to get every estimate
 #: sent while the link is down (the default, 1, hands it the latest only).
@@ -60,10 +64,12 @@ def start_run(processes, ros_env, pair, scenario: Path, tmp_path: Path, *command
     recorder = on("b", [sys.executable, "-m", "tests.graph.record_run", str(recording),
                         str(scenario)])
     assert "recording" in recorder.stdout.readline()
-    on("b", node_command("tile_sensor", scenario))
+    # The recorder must get every input too: the sensor and the commander wait for it as
+    # they wait for the estimator.
+    on("b", node_command("tile_sensor", scenario, "-p", f"hold_for_nodes:={RECORDED}"))
     commander = on("b", node_command(
         "motion_commander", scenario, "-p", "start_delay:=1.0", "-p", "exit_when_done:=true",
-        *commander_args))
+        "-p", f"required_nodes:={RECORDED_AND_SENSOR}", *commander_args))
     return commander, recorder, recording, estimator
 
 
