@@ -198,10 +198,13 @@ def run_grid_scenario(params: Path, args: argparse.Namespace) -> int:
     """A grid localization run (tools/grid_demo.py); its exit code."""
     from estimation_nodes.tools import grid_demo
 
-    if args.in_process or args.plot:
-        print("estimation_demo: --in-process and --plot are not available for grid "
-              "localization runs yet", file=sys.stderr)
+    if args.in_process:
+        print("estimation_demo: --in-process is not available for grid localization runs",
+              file=sys.stderr)
         return 2
+    if args.plot and not args.record:
+        # The picture is drawn from a recording of the run.
+        args.record = args.plot.with_suffix(".mcap")
     grid_topics = resolved(topics.GRID_TOPIC_TYPES)
     try:
         sinks = make_sinks(params, args, grid_topics,
@@ -218,6 +221,10 @@ def run_grid_scenario(params: Path, args: argparse.Namespace) -> int:
     print(other_scenarios(params))
     if args.record:
         print(f"estimation_demo: recorded to {args.record}")
+    if args.plot and code == 0:
+        from estimation_nodes.tools.grid_plot import render_grid
+
+        print(f"estimation_demo: plot written to {render_grid(args.record, args.plot)}")
     return code
 
 

@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation_nodes.core.grid_state import GridLocalization
+from estimation_nodes.nodes.grid_messages import planar_pose
 from estimation_nodes.params import topics
 from estimation_nodes.params.files import read_node_parameters
 from estimation_nodes.params.maps import (
@@ -50,7 +51,7 @@ def is_grid_recording(path: Path) -> bool:
                                        for c in summary.channels.values())
 
 
-def _messages(path: Path) -> tuple[list[tuple[str, object]], dict[str, str]]:
+def recorded_messages(path: Path) -> tuple[list[tuple[str, object]], dict[str, str]]:
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
@@ -64,21 +65,14 @@ def _messages(path: Path) -> tuple[list[tuple[str, object]], dict[str, str]]:
     return [(topic, message) for _p, _l, topic, message in decoded], metadata
 
 
-def _stamp(msg) -> int:
+def header_stamp_ns(msg) -> int:
     return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
-def _pose(pose) -> tuple[float, float, float]:
-    """(x, y, yaw) of a geometry_msgs Pose."""
-    q = pose.orientation
-    return (pose.position.x, pose.position.y,
-            math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z)))
 
 
 def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> GridComparison:
     from estimation_nodes.nodes.grid_messages import scan_beams
 
-    messages, metadata = _messages(path)
+    messages, metadata = recorded_messages(path)
     values = spec_defaults(GRID_LOCALIZER_SPECS)
     values.update(read_node_parameters(parameters_yaml if parameters_yaml is not None
                                        else metadata.get("parameters_yaml", ""),
@@ -100,17 +94,17 @@ def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> Gr
         if topic == f"/{topics.LOCALIZATION_QUALITY}":
             quality = msg.data
         elif topic == f"/{topics.POSE}":
-            online[_stamp(msg)] = (msg, quality)
-    inputs = sorted([(_stamp(m), 0, t, m) for t, m in messages
+            online[header_stamp_ns(msg)] = (msg, quality)
+    inputs = sorted([(header_stamp_ns(m), 0, t, m) for t, m in messages
                      if t == f"/{topics.ODOM}"] +
-                    [(_stamp(m), 1, t, m) for t, m in messages if t == f"/{topics.SCAN}"],
+                    [(header_stamp_ns(m), 1, t, m) for t, m in messages if t == f"/{topics.SCAN}"],
                     key=lambda item: item[:2])
     comparison = GridComparison()
     started = False
     radius, angle = values["quality_radius"], math.radians(values["quality_angle"])
     for stamp, _rank, topic, msg in inputs:
         if topic == f"/{topics.ODOM}":
-            localization.on_odometry(_pose(msg.pose.pose), stamp)
+            localization.on_odometry(planar_pose(msg.pose.pose), stamp)
             continue
         if not started and stamp not in online:
             continue                          # before the localizer's first update
@@ -134,7 +128,7 @@ def _compare(comparison: GridComparison, stamp: int, online, offline, tolerance:
                                       f"not published online")
         return
     msg, quality = online
-    pose = np.array(_pose(msg.pose.pose))
+    pose = np.array(planar_pose(msg.pose.pose))
     offline_pose = np.array(offline.pose)
     yaw_error = abs(math.remainder(pose[2] - offline_pose[2], 2 * math.pi))
     covariance = np.array(msg.pose.covariance).reshape(6, 6)[np.ix_((0, 1, 5), (0, 1, 5))]

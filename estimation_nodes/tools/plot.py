@@ -167,6 +167,14 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     from estimation_nodes.tools.recording import RecordingError, read_recording
 
+    if args.recording.is_file():
+        from estimation_nodes.tools.grid_replay import is_grid_recording
+
+        if is_grid_recording(args.recording):
+            from estimation_nodes.tools.grid_plot import render_grid
+
+            print(f"estimation_plot: wrote {render_grid(args.recording, args.output)}")
+            return
     try:
         record = read_recording(args.recording).record
     except RecordingError as error:

@@ -45,6 +45,12 @@ def test_the_grid_demo_finds_the_robot_and_records_the_run(ros_env, tmp_path):
     assert replay.returncode == 0, replay.stdout + replay.stderr
     compared = int(re.search(r"pose: (\d+) updates compared", replay.stdout).group(1))
     assert compared >= updates - 1
+    # And the picture of it, from the recording.
+    picture = tmp_path / "grid.png"
+    plot = subprocess.run([executable("estimation_plot"), str(recording), "-o", str(picture)],
+                          env=ros_env, capture_output=True, text=True, timeout=120)
+    assert plot.returncode == 0, plot.stderr
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_a_bad_map_ends_the_localizer_with_one_line(ros_env, tmp_path):
