@@ -126,7 +126,8 @@ def test_initial_pose_then_global_localization(nodes, executor, collector_factor
     msg.pose.covariance = cov.ravel().tolist()
     initial.publish(msg)
     assert spin_until(executor, lambda: localizer.handled["initialpose"] == 1, 5.0)
-    assert spin_until(executor, lambda: driver.count("localization_quality") >= 2
+    # Latched with depth 1: the driver may get the start-up quality or only the latest.
+    assert spin_until(executor, lambda: driver.count("localization_quality") >= 1
                       and driver.messages["localization_quality"][-1].data > 0.5, 5.0)
     client = driver.node.create_client(Trigger, "/grid_localizer/global_localization")
     assert client.wait_for_service(timeout_sec=5.0)
