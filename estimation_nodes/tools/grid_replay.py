@@ -1,7 +1,8 @@
 """estimation_replay for grid localization runs: the localizer offline over the recorded inputs.
 
-The recorded map (the first ``/map`` message) and the localizer's recorded
-parameters give the same state grid; odometry and scans are applied in the
+The localizer's recorded parameters and its map (its ``map_file``, or the
+first recorded ``/map`` when it took the map from the topic) give the same
+state grid; odometry and scans are applied in the
 order of their header stamps, each scan with the odometry of its time, as
 grid_localizer does. The first update is the one the online localizer made
 first (it starts from the uniform belief, so what came before it does not
@@ -77,16 +78,20 @@ def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> Gr
     values.update(read_node_parameters(parameters_yaml if parameters_yaml is not None
                                        else metadata.get("parameters_yaml", ""),
                                        "/grid_localizer"))
-    values["map_file"] = ""                  # the recorded map, as the localizer saw it
+    # The map as the localizer had it: its map_file when it had one (an OccupancyGrid's
+    # resolution is a float32, so the recorded /map is not quite the file), else /map.
     settings = build_grid_localizer_settings(values)
-    maps = [m for t, m in messages if t == f"/{topics.MAP}"]
-    if not maps:
-        raise RecordingError(f"{path}: no /map message recorded")
-    info = maps[0].info
-    occupancy = occupancy_from_message(info.width, info.height, info.resolution,
-                                       (info.origin.position.x, info.origin.position.y, 0.0),
-                                       maps[0].data)
-    localization = GridLocalization(settings.model_for(occupancy), settings.noise,
+    if settings.model is not None:
+        model = settings.model
+    else:
+        maps = [m for t, m in messages if t == f"/{topics.MAP}"]
+        if not maps:
+            raise RecordingError(f"{path}: no /map message recorded")
+        info = maps[0].info
+        model = settings.model_for(occupancy_from_message(
+            info.width, info.height, info.resolution,
+            (info.origin.position.x, info.origin.position.y, 0.0), maps[0].data))
+    localization = GridLocalization(model, settings.noise,
                                     values["update_min_d"], values["update_min_a"],
                                     values["max_odom_jump"], values["kidnap_probability"])
     online, quality = {}, float("nan")
