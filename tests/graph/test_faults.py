@@ -212,8 +212,12 @@ def test_flood_is_handled_or_counted_memory_bounded_then_correct_again(
 
     client = node.create_client(Trigger, "/estimator/reset")
     assert client.wait_for_service(timeout_sec=10.0)
+    before = seen.count("belief"), seen.count("belief_predicted")
     future = client.call_async(Trigger.Request())
     assert spin_until(executor, future.done, 10.0) and future.result().success
+    # The reset publishes the initial belief on both: count from after it has arrived.
+    assert spin_until(executor, lambda: seen.count("belief") > before[0]
+                      and seen.count("belief_predicted") > before[1], 10.0)
     start = seen.count("belief")
     for step, observed in enumerate(["bright", "dark", "dark"], start=1):
         predicted_count = seen.count("belief_predicted")
