@@ -305,12 +305,7 @@ def _correct_in(log_likelihood: FloatArray, belief: FloatArray) -> tuple[FloatAr
 
 def correct(belief: FloatArray, log_likelihood: FloatArray) -> tuple[FloatArray, float]:
     """Posterior and log evidence log p(z) = log sum(belief * exp(log_likelihood))."""
-    peak = float(log_likelihood.max())
-    weighted = belief * np.exp(log_likelihood - peak)
-    total = float(weighted.sum())
-    if not total > 0:
-        raise ZeroEvidenceError("every state with probability rules the scan out")
-    return weighted / total, peak + math.log(total)
+    return _correct_in(np.array(log_likelihood, dtype=np.float64), belief)
 
 
 def most_likely_state(belief: FloatArray) -> tuple[int, int, int]:

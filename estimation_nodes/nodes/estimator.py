@@ -60,6 +60,7 @@ from estimation_nodes.nodes.parameters import (
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.process_memory import keep_freed_memory
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
+from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.nodes.rclpy_internals import (
     INCOMPATIBLE_QOS,
     MESSAGE_LOST,
@@ -77,8 +78,6 @@ from estimation_nodes.params.builders import (
 from estimation_nodes.params.wording import plural
 from estimation_nodes.params.specs import ESTIMATOR_SPECS
 
-#: Seconds between two warnings about the same kind of rejected message.
-WARN_THROTTLE_S = 5.0
 #: Order of events stamped at the same instant: a move before the readings after it.
 MOVE, READING = 0, 1
 #: How often the estimator looks for move publishers it has not matched yet, and how long
@@ -115,7 +114,7 @@ class Estimator(Node):
         #: What the reorder history did: events put in their place, applied again, ...
         self.reordering: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
-        self._last_warning: dict[str, float] = {}
+        self._warnings = ThrottledWarnings(self.get_logger())
         self._proposed: tuple[dict[str, Any], EstimatorUpdate] | None = None
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._on_parameters_set)
@@ -452,10 +451,7 @@ class Estimator(Node):
         self._warn(reason, f"{message} (rejected so far: {self.rejected[reason]})")
 
     def _warn(self, reason: str, message: str) -> None:
-        now = time.monotonic()
-        if now - self._last_warning.get(reason, -math.inf) >= WARN_THROTTLE_S:
-            self._last_warning[reason] = now
-            self.get_logger().warning(message)
+        self._warnings.warn(reason, message)
 
     # --- health -----------------------------------------------------------------------------
 

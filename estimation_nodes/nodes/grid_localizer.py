@@ -42,6 +42,7 @@ from estimation_nodes.nodes.grid_messages import (
 from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
 from estimation_nodes.params.maps import (
     MapError,
@@ -50,7 +51,6 @@ from estimation_nodes.params.maps import (
 )
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS
 
-WARN_THROTTLE_S = 5.0
 #: How long a scan waits for the odometry of its time (as tf's message filter waits for a
 #: transform); after that it is used with the latest odometry before it.
 SCAN_WAIT_S = 0.2
@@ -67,7 +67,7 @@ class GridLocalizer(Node):
             self, GRID_LOCALIZER_SPECS, build_grid_localizer_settings)
         self.handled: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
-        self._last_warning: dict[str, float] = {}
+        self._warnings = ThrottledWarnings(self.get_logger())
         self.localization: GridLocalization | None = None
         self.last_update_s = float("nan")
         latched = latched_qos(1)
@@ -167,11 +167,8 @@ class GridLocalizer(Node):
         if not self.localization.due(stamp):
             self.handled["scan_without_motion"] += 1
             return
-        max_range = min(msg.range_max, self._settings.sensor.max_range) \
-            if math.isfinite(msg.range_max) and msg.range_max > 0 \
-            else self._settings.sensor.max_range
-        ranges, angles, nan = scan_beams(msg.ranges, msg.angle_min, msg.angle_increment,
-                                         msg.range_min, max_range, self._values["max_beams"])
+        ranges, angles, nan = scan_beams(msg, self._settings.sensor.max_range,
+                                         self._values["max_beams"])
         if nan:
             self.rejected["nan_ranges"] += nan
         started = time.perf_counter()
@@ -235,10 +232,7 @@ class GridLocalizer(Node):
 
     def _reject(self, reason: str, message: str) -> None:
         self.rejected[reason] += 1
-        now = time.monotonic()
-        if now - self._last_warning.get(reason, -math.inf) >= WARN_THROTTLE_S:
-            self._last_warning[reason] = now
-            self.get_logger().warning(f"{message} (rejected so far: {self.rejected[reason]})")
+        self._warnings.warn(reason, f"{message} (rejected so far: {self.rejected[reason]})")
 
     def _publish_diagnostics(self) -> None:
         values: dict[str, Any] = {"map": "waiting for map" if self.localization is None

@@ -55,13 +55,18 @@ def occupancy_grid(cells: np.ndarray, resolution: float, origin: tuple[float, fl
     return msg
 
 
-def scan_beams(ranges, angle_min: float, angle_increment: float, range_min: float,
-               range_max: float, max_beams: int) -> tuple[np.ndarray, np.ndarray, int]:
-    """The beams to score: (ranges, angles) of at most ``max_beams`` valid readings,
-    evenly chosen, and how many readings were NaN. Readings beyond the range (inf is
-    "no return", REP 117) or below range_min are not scored; NaN ones are counted."""
-    values = np.asarray(ranges, dtype=np.float64)
-    angles = angle_min + angle_increment * np.arange(values.size)
+def scan_beams(scan, laser_max_range: float,
+               max_beams: int) -> tuple[np.ndarray, np.ndarray, int]:
+    """The beams of a LaserScan to score: (ranges, angles) of at most ``max_beams`` valid
+    readings, evenly chosen, and how many readings were NaN. Readings at or beyond the
+    range (the scan's range_max, or ``laser_max_range`` if that is shorter or the scan's
+    is unset; inf is "no return", REP 117) or below range_min are not scored; NaN ones
+    are counted."""
+    range_max = min(scan.range_max, laser_max_range) \
+        if math.isfinite(scan.range_max) and scan.range_max > 0 else laser_max_range
+    range_min = scan.range_min
+    values = np.asarray(scan.ranges, dtype=np.float64)
+    angles = scan.angle_min + scan.angle_increment * np.arange(values.size)
     nan = int(np.isnan(values).sum())
     valid = np.isfinite(values) & (values >= range_min) & (values < range_max)
     chosen = np.flatnonzero(valid)

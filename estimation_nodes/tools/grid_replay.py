@@ -116,10 +116,7 @@ def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> Gr
         started = True
         if not localization.due(stamp):
             continue
-        max_range = min(msg.range_max, settings.sensor.max_range) \
-            if math.isfinite(msg.range_max) and msg.range_max > 0 else settings.sensor.max_range
-        ranges, angles, _ = scan_beams(msg.ranges, msg.angle_min, msg.angle_increment,
-                                       msg.range_min, max_range, values["max_beams"])
+        ranges, angles, _ = scan_beams(msg, settings.sensor.max_range, values["max_beams"])
         localization.update(ranges, angles, stamp)
         _compare(comparison, stamp, online.get(stamp), localization.estimate(radius, angle),
                  tolerance)
