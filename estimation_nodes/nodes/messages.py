@@ -9,10 +9,7 @@ import numpy as np
 from geometry_msgs.msg import PoseWithCovariance
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from estimation_nodes.core.geometry import quaternion_from_rpy
-
-#: Pose axes in the order of PoseWithCovariance's 6 x 6 covariance.
-POSE_AXES = ("x", "y", "z", "roll", "pitch", "yaw")
+from estimation_nodes.nodes.wire import pose_numbers
 
 
 def _multiarray(values: np.ndarray, dims: list[MultiArrayDimension]) -> Float64MultiArray:
@@ -57,23 +54,12 @@ def to_pose_with_covariance(
     x: np.ndarray, P: np.ndarray, components: Sequence[int] = (0,),
     msg: PoseWithCovariance | None = None,
 ) -> PoseWithCovariance:
-    """The state components named by ``components`` (indices for x, y, z, roll, pitch, yaw;
-    -1 for none) as a pose, with the matching block of P in the 6 x 6 covariance
-    (row-major over x, y, z, roll, pitch, yaw); axes without a component are 0.
-
-    Fills ``msg`` when given: building a pose message costs rclpy more than the
-    filter step, and a published message may be reused (publish serializes it).
-    """
-    chosen = list(components) + [-1] * (len(POSE_AXES) - len(components))
-    values = [float(x[c]) if c >= 0 else 0.0 for c in chosen]
+    """The state components named by ``components`` as a pose with the matching block of P
+    (``wire.pose_numbers`` says which), as a message object (``msg`` filled when given)."""
+    numbers = pose_numbers(x, P, components)
     msg = PoseWithCovariance() if msg is None else msg
-    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = values[:3]
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = numbers[:3].tolist()
     (msg.pose.orientation.x, msg.pose.orientation.y, msg.pose.orientation.z,
-     msg.pose.orientation.w) = quaternion_from_rpy(*values[3:])
-    covariance = np.zeros((6, 6))
-    present = [(axis, c) for axis, c in enumerate(chosen) if c >= 0]
-    for row, ci in present:
-        for column, cj in present:
-            covariance[row, column] = P[ci, cj]
-    msg.covariance = covariance.ravel()
+     msg.pose.orientation.w) = numbers[3:7].tolist()
+    msg.covariance = numbers[7:]
     return msg
