@@ -65,6 +65,10 @@ class Submission:
     too_late: bool = False
 
 
+#: What most submissions return (a Submission is immutable, so one of each will do).
+_APPLIED, _REJECTED = Submission(applied=True), Submission(applied=False)
+
+
 @dataclass
 class _Entry(Generic[State]):
     key: tuple[int, int, int]
@@ -106,7 +110,7 @@ class CausalOrder(Generic[State]):
         key = (stamp_ns, rank, self._arrivals)
         entries = self._entries
         if not entries or key > entries[-1].key:
-            return Submission(applied=self._apply_new(key, event))
+            return _APPLIED if self._apply_new(key, event) else _REJECTED
         if key < entries[0].key and not self._holds_everything:
             # Nothing saved goes back far enough: apply it now, as the newest event.
             newest = entries[-1].key
@@ -149,9 +153,13 @@ class CausalOrder(Generic[State]):
 
     def _forget_old(self) -> None:
         entries = self._entries
-        oldest_kept = entries[-1].key[0] - self._horizon_ns if entries else 0
+        if not entries:
+            return
+        oldest_kept = entries[-1].key[0] - self._horizon_ns
+        if entries[0].key[0] >= oldest_kept and len(entries) <= self._max_events:
+            return   # the usual case, one event in and nothing old enough to go: no search
         cut = max(len(entries) - self._max_events,
-                  bisect_right(entries, (oldest_kept, -1, -1), key=_key_of) if entries else 0)
+                  bisect_right(entries, (oldest_kept, -1, -1), key=_key_of))
         if cut > 0:
             del entries[:cut]
             self._holds_everything = False

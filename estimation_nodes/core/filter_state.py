@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -105,6 +105,16 @@ class PositionEstimate(NamedTuple):
     var: float
 
 
+class PreparedSteps(NamedTuple):
+    """The covariances both matrix steps give from ``P`` under ``model`` (which they are
+    for: identity, since steps replace P and never modify it)."""
+
+    P: FloatArray
+    model: LinearGaussianModel
+    predicted_P: FloatArray
+    gain: kalman.CorrectionGain
+
+
 class KalmanFilter:
     """The Kalman estimate: scalar (Algorithm 4) or matrix, as the model's type says."""
 
@@ -114,6 +124,7 @@ class KalmanFilter:
         self._initial = initial
         self._model = model
         self.last_nis = float("nan")
+        self._prepared: PreparedSteps | None = None
         self.reset()
 
     def reconfigure(
@@ -166,8 +177,8 @@ class KalmanFilter:
             self._commit(np.array([x]), np.array([[var]]))
         else:
             with _overflow_checked_by_commit():
-                x_new, P_new = kalman.predict(self.x, self.P, u, model)
-            self._commit(x_new, P_new)
+                x_new = kalman.predicted_mean(self.x, u, model)
+                self._commit(x_new, self._prepared_steps().predicted_P)
         return self.estimate
 
     def correct(self, z: float | Sequence[float]) -> PositionEstimate:
@@ -182,9 +193,33 @@ class KalmanFilter:
             self._commit(np.array([x_corrected]), np.array([[var_corrected]]), nis)
         else:
             with _overflow_checked_by_commit():
-                x_new, P_new, _, nis = kalman.correct_with_nis(self.x, self.P, z, model)
-            self._commit(x_new, P_new, nis)
+                gain = self._prepared_steps().gain
+                x_new, nis = kalman.corrected_mean(self.x, z, gain, model)
+                self._commit(x_new, gain.P, nis)
         return self.estimate
+
+    def prepare(self) -> None:
+        """Compute now what the next step will do to P: neither step's covariance depends
+        on its input, so that step is then only the update of x. For a node to call
+        while it waits for the next input (after publishing): the input's answer goes
+        out sooner. The results are the same as without it; a scalar filter has nothing
+        to prepare, and a failure here is left for the step itself to report."""
+        if isinstance(self._model, LinearGaussianModel):
+            try:
+                self._prepared_steps()
+            except ValueError:   # LinAlgError included; the step raises it again
+                self._prepared = None
+
+    def _prepared_steps(self) -> PreparedSteps:
+        """Both steps' covariances from the current P and model, computed once for them."""
+        prepared = self._prepared
+        if prepared is None or prepared.P is not self.P or prepared.model is not self._model:
+            model = cast(LinearGaussianModel, self._model)
+            with _overflow_checked_by_commit():
+                prepared = PreparedSteps(self.P, model, kalman.predicted_covariance(self.P, model),
+                                         kalman.correction_gain(self.P, model))
+            self._prepared = prepared
+        return prepared
 
     def _commit(self, x: FloatArray, P: FloatArray, nis: float | None = None) -> None:
         """Take a step's result only if every number of it is finite."""

@@ -73,13 +73,12 @@ def correct_scalar(
 
 
 def _symmetric(matrix: FloatArray) -> FloatArray:
-    """Remove the rounding asymmetry that products of matrices leave behind.
-
-    ``matrix`` is a fresh temporary of the caller's, so it is reused in place.
-    """
-    matrix += matrix.T
-    matrix *= 0.5
-    return matrix
+    """Remove the rounding asymmetry that products of matrices leave behind."""
+    # A new sum: adding matrix.T into matrix itself makes numpy copy the overlapping
+    # operand first, which cost three times more on small matrices.
+    result = matrix + matrix.T
+    result *= 0.5
+    return result
 
 
 class InputSizeError(ValueError):
@@ -112,32 +111,94 @@ def _small_inverse(S: FloatArray) -> FloatArray | None:
     return None
 
 
+# Neither step's covariance depends on u or z: P' and the gain follow from P and the
+# model alone. So each step is split into that part and the part that uses the input,
+# and a filter can compute the first ahead, while it waits for the input
+# (filter_state.KalmanFilter.prepare): the step is then a few vector operations.
+
+
+def predicted_covariance(P: FloatArray, model: LinearGaussianModel) -> FloatArray:
+    """P' = A P A' + F Q F' of the prediction (Eq. 6.35), exactly symmetric."""
+    # H = A P A' / 2 (exactly: halving is exact), then H + H' is A P A' made
+    # exactly symmetric, without a separate averaging pass.
+    P_pred = model.A.dot(P).dot(model.half_A_transposed)
+    P_pred += P_pred.T
+    P_pred += model.process_noise
+    return P_pred
+
+
+def predicted_mean(x: FloatArray, u: object, model: LinearGaussianModel) -> FloatArray:
+    """x' = A x + B u of the prediction (Eq. 6.35); raises ValueError for a ``u`` of the
+    wrong size (InputSizeError) or with NaN or inf."""
+    u_vec = _as_vector("u", u, model.input_size)
+    x_pred = model.A.dot(x)
+    x_pred += model.B.dot(u_vec)
+    return x_pred
+
+
 def predict(
     x: FloatArray, P: FloatArray, u: object, model: LinearGaussianModel
 ) -> tuple[FloatArray, FloatArray]:
     """Prediction (Eq. 6.35): x' = A x + B u,  P' = A P A' + F Q F'."""
-    u_vec = _as_vector("u", u, model.input_size)
-    A = model.A
-    x_pred = A.dot(x)
-    x_pred += model.B.dot(u_vec)
-    # H = A P A' / 2 (exactly: halving is exact), then H + H' is A P A' made
-    # exactly symmetric, without a separate averaging pass.
-    P_pred = A.dot(P).dot(model.half_A_transposed)
-    P_pred += P_pred.T
-    P_pred += model.process_noise
-    return x_pred, P_pred
+    return predicted_mean(x, u, model), predicted_covariance(P, model)
+
+
+class CorrectionGain(NamedTuple):
+    """What a correction from covariance P does whatever the measurement is."""
+
+    #: The gain K = P C' S^-1.
+    K: FloatArray
+    #: The corrected covariance, Joseph form.
+    P: FloatArray
+    #: The innovation covariance S = C P C' + R, and its inverse when taken in closed form
+    #: (None: the NIS solves with S).
+    S: FloatArray
+    S_inv: FloatArray | None
+
+
+def correction_gain(P: FloatArray, model: LinearGaussianModel) -> CorrectionGain:
+    """The gain and the corrected covariance of Eq. 6.36, Joseph form.
+
+    K = P C' (C P C' + R)^-1,   P' = (I - K C) P (I - K C)' + K R K'
+
+    The Joseph form holds for any gain and keeps P symmetric positive
+    semi-definite where the short form P - K C P can lose it to rounding.
+    """
+    C, R = model.C, model.R
+    PCt = P.dot(model.C_transposed)
+    innovation_cov = C.dot(PCt)
+    innovation_cov += R
+    S_inv = _small_inverse(innovation_cov)
+    if S_inv is not None:
+        K = PCt.dot(S_inv)
+    else:   # S and P are symmetric, so K' = S^-1 (C P)
+        K = cast(FloatArray, np.linalg.solve(innovation_cov, PCt.T).T)
+    I_KC = model.identity - K.dot(C)
+    P_new = I_KC.dot(P).dot(I_KC.T)
+    P_new += K.dot(R).dot(K.T)
+    return CorrectionGain(K, _symmetric(P_new), innovation_cov, S_inv)
+
+
+def corrected_mean(
+    x: FloatArray, z: object, gain: CorrectionGain, model: LinearGaussianModel
+) -> tuple[FloatArray, float]:
+    """x' = x + K (z - C x) of Eq. 6.36 and the normalized innovation squared
+    y' S^-1 y of y = z - C x; raises ValueError for a ``z`` of the wrong size
+    (InputSizeError) or with NaN or inf."""
+    z_vec = _as_vector("z", z, model.measurement_size)
+    innovation = z_vec - model.C.dot(x)
+    x_new = x + gain.K.dot(innovation)
+    if gain.S_inv is not None:
+        nis = float(innovation.dot(gain.S_inv.dot(innovation)))
+    else:
+        nis = float(innovation.dot(np.linalg.solve(gain.S, innovation)))
+    return x_new, nis
 
 
 def correct(
     x: FloatArray, P: FloatArray, z: object, model: LinearGaussianModel
 ) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Correction (Eq. 6.36) with the Joseph-form covariance.
-
-    K = P C' (C P C' + R)^-1,  x' = x + K (z - C x),
-    P' = (I - K C) P (I - K C)' + K R K'
-
-    The Joseph form holds for any gain and keeps P symmetric positive
-    semi-definite where the short form P - K C P can lose it to rounding.
+    """Correction (Eq. 6.36) with the Joseph-form covariance (see ``correction_gain``).
 
     Returns
     -------
@@ -151,26 +212,11 @@ def correct(
 def correct_with_nis(
     x: FloatArray, P: FloatArray, z: object, model: LinearGaussianModel
 ) -> tuple[FloatArray, FloatArray, FloatArray, float]:
-    """``correct`` and the normalized innovation squared of ``z``, from one S = C P C' + R:
-    ``(x, P, K, nis)``, with nis = y' S^-1 y, y = z - C x."""
-    z_vec = _as_vector("z", z, model.measurement_size)
-    C, R = model.C, model.R
-    PCt = P.dot(model.C_transposed)
-    innovation_cov = C.dot(PCt)
-    innovation_cov += R
-    innovation = z_vec - C.dot(x)
-    S_inv = _small_inverse(innovation_cov)
-    if S_inv is not None:
-        K = PCt.dot(S_inv)
-        nis = float(innovation.dot(S_inv.dot(innovation)))
-    else:   # S and P are symmetric, so K' = S^-1 (C P)
-        K = cast(FloatArray, np.linalg.solve(innovation_cov, PCt.T).T)
-        nis = float(innovation.dot(np.linalg.solve(innovation_cov, innovation)))
-    x_new = x + K.dot(innovation)
-    I_KC = model.identity - K.dot(C)
-    P_new = I_KC.dot(P).dot(I_KC.T)
-    P_new += K.dot(R).dot(K.T)
-    return x_new, _symmetric(P_new), K, nis
+    """``correct`` and the normalized innovation squared of ``z``: ``(x, P, K, nis)``."""
+    _as_vector("z", z, model.measurement_size)   # a bad z raises before any work
+    gain = correction_gain(P, model)
+    x_new, nis = corrected_mean(x, z, gain, model)
+    return x_new, gain.P, gain.K, nis
 
 
 def normalized_innovation_squared_scalar(x: float, var: float, z: float, var_z: float) -> float:

@@ -35,7 +35,6 @@ from rclpy.event_handler import (
 from rclpy.qos import qos_policy_name_from_kind
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.time import Time
 from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
@@ -47,11 +46,7 @@ from estimation_nodes.core.filter_state import (
     KalmanFilter,
     NonFiniteResultError,
 )
-from estimation_nodes.nodes.messages import (
-    to_multiarray,
-    to_pose_with_covariance,
-    to_state_message,
-)
+from estimation_nodes.nodes import wire
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
     overlay,
@@ -128,10 +123,6 @@ class Estimator(Node):
         self._kalman_predicted_pubs = self._pose_outputs(
             topics.KALMAN_ESTIMATE_PREDICTED, topics.KALMAN_ESTIMATE_PREDICTED_STAMPED, latched)
         self._state_pub = self._output(Float64MultiArray, topics.KALMAN_STATE, latched)
-        # One stamped pose message per output (by 'predicted'), reused: building one costs
-        # rclpy more than the filter step, and publish serializes it at once.
-        self._stamped_poses = {True: PoseWithCovarianceStamped(),
-                               False: PoseWithCovarianceStamped()}
         self._state_predicted_pub = self._output(
             Float64MultiArray, topics.KALMAN_STATE_PREDICTED, latched)
         self._diagnostics_pub = self._output(DiagnosticArray, "/diagnostics", 10)
@@ -234,13 +225,16 @@ class Estimator(Node):
             if self._order is None:
                 self._event_stamp_ns = stamp
                 handler(msg, True)
-                return
-            event = (stamp, rank, (stamp, handler, msg))
-            if self._held_readings or (rank == READING
-                                       and self._moves_unmatched_since is not None):
-                self._held_readings.append(event)
-                return
-            self._account(self._order.submit(*event))
+            else:
+                event = (stamp, rank, (stamp, handler, msg))
+                if self._held_readings or (rank == READING
+                                           and self._moves_unmatched_since is not None):
+                    self._held_readings.append(event)
+                    return
+                self._account(self._order.submit(*event))
+            # The answer is out: while the next input is on its way, work out what it
+            # will do to the Kalman covariance, so that its answer goes out sooner.
+            self._kalman.prepare()
 
         return on_message
 
@@ -296,7 +290,7 @@ class Estimator(Node):
         self._histogram.predict(msg.data)
         if first_time:
             self.handled["motion_cmd"] += 1
-        self._belief_predicted_pub.publish(to_multiarray(self._histogram.belief, "cells"))
+        self._belief_predicted_pub.publish(wire.vector(self._histogram.belief, "cells"))
         # A filter with m = 1 input takes the command as u; a larger one takes kalman_input.
         if self._kalman.input_size == 1:
             self._kalman_step(True, float(msg.data), topics.MOTION_CMD, first_time)
@@ -318,7 +312,7 @@ class Estimator(Node):
             return False
         if first_time:
             self.handled["tile_observation"] += 1
-        self._belief_pub.publish(to_multiarray(self._histogram.belief, "cells"))
+        self._belief_pub.publish(wire.vector(self._histogram.belief, "cells"))
         return True
 
     def _on_position_measurement(self, msg: Float64, first_time: bool) -> bool:
@@ -358,29 +352,26 @@ class Estimator(Node):
         """Every output, after a restart of the filters: a late subscriber then gets the
         state after it, not an estimate from before."""
         self._event_stamp_ns = self.get_clock().now().nanoseconds
-        belief = to_multiarray(self._histogram.belief, "cells")
+        belief = wire.vector(self._histogram.belief, "cells")
         self._belief_predicted_pub.publish(belief)
         self._belief_pub.publish(belief)
         for predicted in (True, False):
             self._publish_kalman(predicted)
 
     def _publish_kalman(self, predicted: bool) -> None:
-        """The estimate as a pose (with its stamped twin) and the full state, x with P."""
-        state_pub, pose_pubs = ((self._state_predicted_pub, self._kalman_predicted_pubs)
-                                if predicted else (self._state_pub, self._kalman_pubs))
+        """The estimate as a pose (with its stamped twin) and the full state, x with P,
+        each serialized here (wire.py: a message object costs rclpy more than the step)."""
+        state_pub, (pose_pub, stamped_pub) = (
+            (self._state_predicted_pub, self._kalman_predicted_pubs) if predicted
+            else (self._state_pub, self._kalman_pubs))
         x, P = self._kalman.x, self._kalman.P
-        # The full state first: it is the whole estimate, and each publish costs rclpy
-        # tens of microseconds, so what comes first reaches its subscribers soonest.
-        state_pub.publish(to_state_message(x, P))
-        plain, stamped_pub = pose_pubs
-        stamped = self._stamped_poses[predicted]   # its pose is the plain message
-        pose = to_pose_with_covariance(
-            x, P, self._settings.kalman.pose_components, stamped.pose)
-        plain.publish(pose)
-        # When the event this estimate follows from happened, as ROS estimators stamp.
-        stamped.header.stamp = Time(seconds=0, nanoseconds=self._event_stamp_ns).to_msg()
-        stamped.header.frame_id = self._values["frame_id"]
-        stamped_pub.publish(stamped)
+        # The full state first: it is the whole estimate, so it reaches subscribers soonest.
+        state_pub.publish(wire.state(x, P))
+        pose = wire.pose_numbers(x, P, self._settings.kalman.pose_components)
+        pose_pub.publish(wire.pose_with_covariance(pose))
+        # Stamped when the event this estimate follows from happened, as ROS estimators do.
+        stamped_pub.publish(wire.pose_with_covariance_stamped(
+            self._event_stamp_ns, self._values["frame_id"], pose))
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         """Back to the initial state, published on every output so that a late subscriber
