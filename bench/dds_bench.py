@@ -1,6 +1,6 @@
 """Latency and throughput through DDS: the estimator against a bare rclpy relay.
 
-    python bench/dds_bench.py [--events 3000] [--rounds 3]
+    python bench/dds_bench.py [--events 3000] [--rounds 5] [--pause-ms 2] [--pin]
 
 A driver node (this process) publishes ``tile_observation`` and waits for
 the answer: the estimator's corrected ``belief`` (N = 5, the book's world),
@@ -8,7 +8,10 @@ or the same String back from bench/relay_node.py on ``relay_out``. The
 matrix filter's path is measured the same way (latency only): a 2-value
 ``kalman_measurement`` to the estimator in the tracking_2d scenario (4
 states, 2 inputs, 2 outputs) answered on ``kalman_state``, against the relay's
-``relay_vector_out``. The
+``relay_vector_out``, back to back and again with a pause (``--pause-ms``)
+before each measurement, so that it finds the node idle as a sensor's
+readings do; back to back, a node's whole work per event (after its answer
+too) delays the next answer. The
 estimator and the relay run as separate processes, one at a time, in
 alternating rounds, so both see the same machine. Latency: one message in
 flight, publish to receipt, p50 and p99. Throughput: a window of 100 in
@@ -43,13 +46,32 @@ WINDOW = 100
 TRACKING = BENCH.parent / "msgs_config" / "tracking_2d.yaml"
 
 
+#: The CPUs of the node under test and of this driver, when the machine has two or more:
+#: each process then keeps a core of its own, whichever node runs, instead of the
+#: scheduler placing them together in some rounds and apart in others.
+NODE_CPUS: set[int] | None = None
+
+
+def pin_cores() -> str:
+    """Keep this process on one CPU and leave the others to the node under test."""
+    global NODE_CPUS
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        return "not pinned (one CPU)"
+    os.sched_setaffinity(0, {cpus[0]})
+    NODE_CPUS = set(cpus[1:])
+    return f"driver pinned to CPU {cpus[0]}, node to CPU {','.join(map(str, cpus[1:]))}"
+
+
 def start(kind: str, env: dict, params: tuple[str, ...] = ()) -> subprocess.Popen:
     if kind == "estimator":
         command = [sys.executable, "-m", "estimation_nodes.nodes.estimator", "--ros-args",
                    *params, "-p", "history_depth:=1000", "--log-level", "warn"]
     else:
         command = [sys.executable, str(BENCH / "relay_node.py")]
-    return subprocess.Popen(command, env=env)
+    cpus = NODE_CPUS
+    return subprocess.Popen(command, env=env, preexec_fn=(
+        (lambda: os.sched_setaffinity(0, cpus)) if cpus else None))
 
 
 class Driver:
@@ -99,7 +121,10 @@ class Driver:
         # The transient_local history of a late match can add one more: let it arrive.
         self.wait_until(lambda: False, 0.5)
 
-    def latency(self, events: int) -> np.ndarray:
+    def latency(self, events: int, pause_s: float = 0.0) -> np.ndarray:
+        """One message in flight: publish, wait for the answer, and send the next at once
+        or, with ``pause_s``, that long after the answer (the node is idle when it comes,
+        as between the readings of a sensor)."""
         samples = np.empty(events)
         for index in range(events):
             target = self.received + 1
@@ -108,6 +133,8 @@ class Driver:
             while self.received < target:
                 self.executor.spin_once(timeout_sec=1.0)
             samples[index] = (self.arrivals[-1] - start) / 1e3
+            if pause_s:
+                time.sleep(pause_s)
         return samples
 
     def throughput(self, events: int) -> float:
@@ -159,8 +186,10 @@ def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float, float
         stop_process(process)
 
 
-def measure_matrix_latency(kind: str, env: dict, events: int) -> np.ndarray:
-    """kalman_measurement -> kalman_state of the tracking filter, or the relay's echo."""
+def measure_matrix_latency(kind: str, env: dict, events: int,
+                           pause_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """kalman_measurement -> kalman_state of the tracking filter, or the relay's echo:
+    back to back, and with ``pause_s`` between an answer and the next measurement."""
     from std_msgs.msg import Float64MultiArray
 
     from estimation_nodes.nodes.qos import latched_qos
@@ -171,7 +200,7 @@ def measure_matrix_latency(kind: str, env: dict, events: int) -> np.ndarray:
     try:
         driver.connect()
         driver.latency(200)   # warm-up
-        return driver.latency(events)
+        return driver.latency(events), driver.latency(events // 5, pause_s)
     finally:
         driver.close()
         stop_process(process)
@@ -181,7 +210,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--events", type=int, default=3000)
     parser.add_argument("--rounds", type=int, default=5)
+    parser.add_argument("--pause-ms", type=float, default=2.0,
+                        help="pause between an answer and the next measurement, for the "
+                             "matrix filter's latency with the node idle")
+    parser.add_argument("--pin", action="store_true",
+                        help="keep the driver on one CPU and the node on the others")
     args = parser.parse_args()
+    placement = pin_cores() if args.pin else "not pinned"
     env = confine_ros(77)
     import rclpy
 
@@ -189,6 +224,7 @@ def main() -> None:
     results: dict[str, dict[str, list]] = {k: {"lat": [], "rate": [], "cpu": []}
                                            for k in ("estimator", "relay")}
     matrix: dict[str, list] = {"estimator": [], "relay": []}
+    paced: dict[str, list] = {"estimator": [], "relay": []}
     try:
         for _ in range(args.rounds):
             for kind in ("relay", "estimator"):
@@ -196,7 +232,10 @@ def main() -> None:
                 results[kind]["lat"].append(latencies)
                 results[kind]["rate"].append(rate)
                 results[kind]["cpu"].append(cpu)
-                matrix[kind].append(measure_matrix_latency(kind, env, args.events // 3))
+                back_to_back, idle = measure_matrix_latency(
+                    kind, env, args.events // 3, args.pause_ms / 1e3)
+                matrix[kind].append(back_to_back)
+                paced[kind].append(idle)
     finally:
         rclpy.try_shutdown()
     rows = []
@@ -210,21 +249,24 @@ def main() -> None:
     rel = np.concatenate(results["relay"]["lat"])
     ratio_rate = np.median(results["estimator"]["rate"]) / np.median(results["relay"]["rate"])
     print(f"DDS: {args.rounds} rounds x {args.events} events each, N = 5, "
-          f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}")
+          f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, {placement}")
     ratio_cpu = np.median(results["relay"]["cpu"]) / np.median(results["estimator"]["cpu"])
     print(table(["node", "latency p50 (us)", "latency p99 (us)", "throughput (events/s, median)",
                  "throughput range", "node CPU per event under load (us)"], rows))
     print(f"estimator / relay: p50 {np.percentile(est, 50) / np.percentile(rel, 50):.2f}, "
           f"p99 {np.percentile(est, 99) / np.percentile(rel, 99):.2f}, "
           f"throughput {ratio_rate:.2f} (by CPU per event: {ratio_cpu:.2f})")
-    est, rel = np.concatenate(matrix["estimator"]), np.concatenate(matrix["relay"])
     print("Matrix filter (tracking_2d: 4 states, 2 inputs, 2 outputs), latency "
           "kalman_measurement -> kalman_state against the relay's echo")
-    print(table(["node", "latency p50 (us)", "latency p99 (us)"],
-                [[kind, f"{np.percentile(lat, 50):.0f}", f"{np.percentile(lat, 99):.0f}"]
-                 for kind, lat in (("estimator", est), ("relay", rel))]))
-    print(f"estimator / relay: p50 {np.percentile(est, 50) / np.percentile(rel, 50):.2f}, "
-          f"p99 {np.percentile(est, 99) / np.percentile(rel, 99):.2f}")
+    for label, samples in (("back to back", matrix),
+                           (f"{args.pause_ms:g} ms pause before each measurement", paced)):
+        est, rel = np.concatenate(samples["estimator"]), np.concatenate(samples["relay"])
+        print(f"{label}:")
+        print(table(["node", "latency p50 (us)", "latency p99 (us)"],
+                    [[kind, f"{np.percentile(lat, 50):.0f}", f"{np.percentile(lat, 99):.0f}"]
+                     for kind, lat in (("estimator", est), ("relay", rel))]))
+        print(f"estimator / relay: p50 {np.percentile(est, 50) / np.percentile(rel, 50):.2f}, "
+              f"p99 {np.percentile(est, 99) / np.percentile(rel, 99):.2f}")
 
 
 if __name__ == "__main__":
