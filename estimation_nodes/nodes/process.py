@@ -42,6 +42,11 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> i
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except RCLError:
+        # rclpy may still run a ready callback after Ctrl-C has shut the context down;
+        # whatever it asked of rcl then fails with "context is invalid": a normal end.
+        if rclpy.ok():
+            raise
     except ConfigurationError as error:
         rclpy.logging.get_logger(name).fatal(f"invalid parameter {error}")
         code = 2
