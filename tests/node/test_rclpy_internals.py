@@ -69,3 +69,38 @@ def test_the_overrides_given_to_a_node_can_be_read(context):
             "rclpy changed: Node._parameter_overrides no longer holds the given values")
     finally:
         node.destroy_node()
+
+
+class FakeHandle:
+    """Counts how deeply it is held, as an rcl handle's context manager does."""
+
+    def __init__(self, gone=False):
+        self.held, self.gone = 0, gone
+
+    def __enter__(self):
+        if self.gone:
+            raise RuntimeError("destroyed")
+        self.held += 1
+
+    def __exit__(self, *exc_info):
+        self.held -= 1
+
+
+def test_the_events_waitable_holds_its_handles_for_the_wait_and_no_longer():
+    from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
+
+    from estimation_nodes.nodes.rclpy_internals import SubscriptionEvents
+
+    events = SubscriptionEvents(MutuallyExclusiveCallbackGroup())
+    first, second = FakeHandle(), FakeHandle()
+    events._handles = [first, second]
+    events.__enter__()
+    assert (first.held, second.held) == (1, 1)
+    events.__exit__(None, None, None)
+    assert (first.held, second.held) == (0, 0)
+    # A handle destroyed meanwhile: the executor skips the waitable, which must let go of
+    # the handles it took before it.
+    events._handles = [first, FakeHandle(gone=True)]
+    with pytest.raises(RuntimeError):
+        events.__enter__()
+    assert first.held == 0
