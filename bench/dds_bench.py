@@ -187,9 +187,10 @@ def measure(kind: str, env: dict, events: int) -> tuple[np.ndarray, float, float
 
 
 def measure_matrix_latency(kind: str, env: dict, events: int,
-                           pause_s: float) -> tuple[np.ndarray, np.ndarray]:
+                           pause_s: float) -> tuple[np.ndarray, np.ndarray, float]:
     """kalman_measurement -> kalman_state of the tracking filter, or the relay's echo:
-    back to back, and with ``pause_s`` between an answer and the next measurement."""
+    back to back, and with ``pause_s`` between an answer and the next measurement; and
+    the node's CPU time per measurement back to back (less noisy than the latency)."""
     from std_msgs.msg import Float64MultiArray
 
     from estimation_nodes.nodes.qos import latched_qos
@@ -200,7 +201,10 @@ def measure_matrix_latency(kind: str, env: dict, events: int,
     try:
         driver.connect()
         driver.latency(200)   # warm-up
-        return driver.latency(events), driver.latency(events // 5, pause_s)
+        cpu_before = cpu_seconds(process.pid)
+        back_to_back = driver.latency(events)
+        cpu_per_event = (cpu_seconds(process.pid) - cpu_before) / events
+        return back_to_back, driver.latency(events // 5, pause_s), cpu_per_event
     finally:
         driver.close()
         stop_process(process)
@@ -225,6 +229,7 @@ def main() -> None:
                                            for k in ("estimator", "relay")}
     matrix: dict[str, list] = {"estimator": [], "relay": []}
     paced: dict[str, list] = {"estimator": [], "relay": []}
+    matrix_cpu: dict[str, list] = {"estimator": [], "relay": []}
     try:
         for _ in range(args.rounds):
             for kind in ("relay", "estimator"):
@@ -232,10 +237,11 @@ def main() -> None:
                 results[kind]["lat"].append(latencies)
                 results[kind]["rate"].append(rate)
                 results[kind]["cpu"].append(cpu)
-                back_to_back, idle = measure_matrix_latency(
+                back_to_back, idle, cpu = measure_matrix_latency(
                     kind, env, args.events // 3, args.pause_ms / 1e3)
                 matrix[kind].append(back_to_back)
                 paced[kind].append(idle)
+                matrix_cpu[kind].append(cpu)
     finally:
         rclpy.try_shutdown()
     rows = []
@@ -267,6 +273,9 @@ def main() -> None:
                      for kind, lat in (("estimator", est), ("relay", rel))]))
         print(f"estimator / relay: p50 {np.percentile(est, 50) / np.percentile(rel, 50):.2f}, "
               f"p99 {np.percentile(est, 99) / np.percentile(rel, 99):.2f}")
+    cpu = {kind: np.median(matrix_cpu[kind]) * 1e6 for kind in matrix_cpu}
+    print(f"node CPU per measurement back to back (median of rounds): estimator "
+          f"{cpu['estimator']:.0f} us, relay {cpu['relay']:.0f} us")
 
 
 if __name__ == "__main__":
