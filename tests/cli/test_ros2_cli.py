@@ -18,7 +18,9 @@ from tests.conftest import SCENARIOS
 
 PKG = "estimation_nodes"
 NODES = ("estimator", "tile_sensor", "motion_commander", "linear_system")
-EXECUTABLES = {*NODES, "estimation_demo", "estimation_plot", "estimation_replay"}
+GRID_NODES = ("grid_localizer", "planar_robot")
+EXECUTABLES = {*NODES, *GRID_NODES, "estimation_demo", "estimation_plot", "estimation_replay",
+               "foxglove_view"}
 #: Example 6.14 of the book, step 3 (../shared/reference/README.md).
 FINAL_BELIEF = [0.048443, 0.063322, 0.244983, 0.528374, 0.114879]
 FINAL_PREDICTION = [0.1, 0.130714, 0.168571, 0.363571, 0.237143]
@@ -107,9 +109,10 @@ def test_pkg_executables_lists_every_entry_point(ros2):
 
 
 @time_limit(60)
-@pytest.mark.parametrize("node", NODES)
+@pytest.mark.parametrize("node", NODES + GRID_NODES)
 def test_ros2_run_then_ctrl_c_ends_the_node_cleanly(ros2, ros2_start, node):
-    process = start_nodes(ros2, ros2_start, node)[node]
+    args = params_file("grid_corridor.yaml") if node in GRID_NODES else ()
+    process = start_nodes(ros2, ros2_start, node, args=args)[node]
     assert stop_group(process) == 0
     output = process.stdout.read()
     print(output)
@@ -217,3 +220,42 @@ def test_huge_measurements_never_make_the_kalman_estimate_inf_or_nan(ros2, ros2_
     for pose in echo_all(ros2, "/kalman_estimate", "geometry_msgs/msg/PoseWithCovariance"):
         assert math.isfinite(pose["pose"]["position"]["x"]), pose
         assert all(math.isfinite(c) for c in pose["covariance"]), pose
+
+
+def stamp_s(header: dict) -> float:
+    return header["stamp"]["sec"] + header["stamp"]["nanosec"] * 1e-9
+
+
+@time_limit(180)
+def test_grid_localization_run_with_ros2_run_and_watched_with_the_cli(ros2, ros2_start):
+    corridor = params_file("grid_corridor.yaml")
+    start_nodes(ros2, ros2_start, "grid_localizer", "planar_robot", args=corridor)
+    # Every quality the localizer publishes from here on, for the service call below.
+    qualities = ros2_start("topic", "echo", "--no-daemon", "--field", "data",
+                           "/localization_quality", "std_msgs/msg/Float64")
+
+    def quality():
+        return echo(ros2, "/localization_quality", "std_msgs/msg/Float64")["data"]
+
+    wait_for(lambda: quality() > 0.9, 60, "localization_quality above 0.9")
+    pose = echo(ros2, "/pose", "geometry_msgs/msg/PoseWithCovarianceStamped")
+    truth = echo(ros2, "/true_pose", "geometry_msgs/msg/PoseStamped")
+    assert pose["header"]["frame_id"] == "map"
+    covariance = np.array(pose["pose"]["covariance"]).reshape(6, 6)
+    assert np.isfinite(covariance).all() and min(np.diag(covariance)[[0, 1, 5]]) > 0
+    # The two echoes come seconds apart: the robot, at 0.5 m/s at most, moved in between.
+    found, true = pose["pose"]["pose"]["position"], truth["pose"]["position"]
+    moved = 0.5 * abs(stamp_s(truth["header"]) - stamp_s(pose["header"]))
+    assert math.dist((found["x"], found["y"]), (true["x"], true["y"])) <= 0.3 + moved + 0.1
+
+    called = ros2("service", "call", "/grid_localizer/global_localization",
+                  "std_srvs/srv/Trigger")
+    assert called.returncode == 0 and "success=True" in called.stdout, called.stdout
+    # The belief is uniform at once (quality about 1e-4 in the corridor), then found again.
+    wait_for(lambda: quality() > 0.9, 60, "localization_quality above 0.9 again")
+    stop_group(qualities)
+    seen = [float(line) for line in qualities.stdout.read().split() if line[0].isdigit()]
+    localized = [i for i, q in enumerate(seen) if q > 0.9]
+    assert localized, seen
+    dropped = [i for i in range(localized[0], len(seen)) if seen[i] < 0.01]
+    assert dropped and max(seen[dropped[0]:]) > 0.9, seen
