@@ -105,14 +105,17 @@ class PositionEstimate(NamedTuple):
     var: float
 
 
-class PreparedSteps(NamedTuple):
-    """The covariances both matrix steps give from ``P`` under ``model`` (which they are
-    for: identity, since steps replace P and never modify it)."""
+class _PreparedSteps:
+    """What the matrix steps give from ``P`` under ``model`` (which they are for: by
+    identity, since steps replace P and never modify it), each computed when first asked
+    for: the predicted covariance and the correction's gain and covariance."""
 
-    P: FloatArray
-    model: LinearGaussianModel
-    predicted_P: FloatArray
-    gain: kalman.CorrectionGain
+    __slots__ = ("P", "model", "predicted_P", "gain")
+
+    def __init__(self, P: FloatArray, model: LinearGaussianModel) -> None:
+        self.P, self.model = P, model
+        self.predicted_P: FloatArray | None = None
+        self.gain: kalman.CorrectionGain | None = None
 
 
 class KalmanFilter:
@@ -124,7 +127,7 @@ class KalmanFilter:
         self._initial = initial
         self._model = model
         self.last_nis = float("nan")
-        self._prepared: PreparedSteps | None = None
+        self._prepared: _PreparedSteps | None = None
         self.reset()
 
     def reconfigure(
@@ -178,7 +181,7 @@ class KalmanFilter:
         else:
             with _overflow_checked_by_commit():
                 x_new = kalman.predicted_mean(self.x, u, model)
-                self._commit(x_new, self._prepared_steps().predicted_P)
+                self._commit(x_new, self._predicted_covariance())
         return self.estimate
 
     def correct(self, z: float | Sequence[float]) -> PositionEstimate:
@@ -193,7 +196,7 @@ class KalmanFilter:
             self._commit(np.array([x_corrected]), np.array([[var_corrected]]), nis)
         else:
             with _overflow_checked_by_commit():
-                gain = self._prepared_steps().gain
+                gain = self._correction_gain()
                 x_new, nis = kalman.corrected_mean(self.x, z, gain, model)
                 self._commit(x_new, gain.P, nis)
         return self.estimate
@@ -202,24 +205,37 @@ class KalmanFilter:
         """Compute now what the next step will do to P: neither step's covariance depends
         on its input, so that step is then only the update of x. For a node to call
         while it waits for the next input (after publishing): the input's answer goes
-        out sooner. The results are the same as without it; a scalar filter has nothing
+        out sooner. Both steps are prepared, since either may come next: one of them
+        for nothing. The results are the same as without it; a scalar filter has nothing
         to prepare, and a failure here is left for the step itself to report."""
         if isinstance(self._model, LinearGaussianModel):
-            try:
-                self._prepared_steps()
-            except ValueError:   # LinAlgError included; the step raises it again
-                self._prepared = None
+            with _overflow_checked_by_commit():
+                try:
+                    self._predicted_covariance()
+                    self._correction_gain()
+                except ValueError:   # LinAlgError included; the step raises it again
+                    self._prepared = None
 
-    def _prepared_steps(self) -> PreparedSteps:
-        """Both steps' covariances from the current P and model, computed once for them."""
+    def _steps_for_current_state(self) -> _PreparedSteps:
         prepared = self._prepared
         if prepared is None or prepared.P is not self.P or prepared.model is not self._model:
-            model = cast(LinearGaussianModel, self._model)
-            with _overflow_checked_by_commit():
-                prepared = PreparedSteps(self.P, model, kalman.predicted_covariance(self.P, model),
-                                         kalman.correction_gain(self.P, model))
-            self._prepared = prepared
+            prepared = self._prepared = _PreparedSteps(
+                self.P, cast(LinearGaussianModel, self._model))
         return prepared
+
+    # Called with numpy's overflow warnings off (see _overflow_checked_by_commit).
+
+    def _predicted_covariance(self) -> FloatArray:
+        prepared = self._steps_for_current_state()
+        if prepared.predicted_P is None:
+            prepared.predicted_P = kalman.predicted_covariance(prepared.P, prepared.model)
+        return prepared.predicted_P
+
+    def _correction_gain(self) -> kalman.CorrectionGain:
+        prepared = self._steps_for_current_state()
+        if prepared.gain is None:
+            prepared.gain = kalman.correction_gain(prepared.P, prepared.model)
+        return prepared.gain
 
     def _commit(self, x: FloatArray, P: FloatArray, nis: float | None = None) -> None:
         """Take a step's result only if every number of it is finite."""

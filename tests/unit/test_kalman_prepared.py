@@ -90,3 +90,19 @@ def test_a_preparation_that_cannot_be_finite_leaves_the_error_to_the_step():
     assert kalman_filter.snapshot() == before
     kalman_filter.correct([1.0])   # the correction does not overflow and still works
     assert np.isfinite(kalman_filter.P).all()
+
+
+def test_without_prepare_each_step_computes_only_its_own_covariance(monkeypatch):
+    calls = []
+    for name in ("predicted_covariance", "correction_gain"):
+        original = getattr(kalman, name)
+        monkeypatch.setattr(kalman, name, lambda *args, _f=original, _n=name:
+                            calls.append(_n) or _f(*args))
+    model = random_model(np.random.default_rng(8), 4, 2, 2, 2)
+    kalman_filter = KalmanFilter(GaussianState(np.zeros(4), np.eye(4)), model)
+    kalman_filter.predict([0.1, 0.2])
+    kalman_filter.correct([1.0, 2.0])
+    assert calls == ["predicted_covariance", "correction_gain"]
+    kalman_filter.prepare()   # both, for whichever step comes next
+    kalman_filter.correct([1.5, 2.5])
+    assert calls[2:] == ["predicted_covariance", "correction_gain"]
