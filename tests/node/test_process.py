@@ -1,5 +1,8 @@
 """A node's process: how it ends."""
 
+import signal
+
+import pytest
 import rclpy
 from rclpy.node import Node
 
@@ -21,5 +24,14 @@ class ShutDownDuringItsTimer(Node):
         self.count_publishers("/motion_cmd")   # rcl: "node's context is invalid"
 
 
-def test_a_callback_after_shutdown_ends_the_node_normally(ros_env):
+@pytest.fixture
+def sigint_restored():
+    """run() ignores SIGINT once it shuts down, for the rest of its process: here the
+    test's, whose later children would inherit the ignored signal."""
+    previous = signal.getsignal(signal.SIGINT)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+def test_a_callback_after_shutdown_ends_the_node_normally(ros_env, sigint_restored):
     assert run(ShutDownDuringItsTimer, ["node"]) == 0
