@@ -22,7 +22,12 @@ import yaml
 
 from estimation_nodes.params import topics
 from estimation_nodes.params.files import check_params_file
-from estimation_nodes.tools.graph_runtime import run_until_done, spin_until, stop_process
+from estimation_nodes.tools.graph_runtime import (
+    run_until_done,
+    spin_until,
+    start_node,
+    stop_children,
+)
 from estimation_nodes.tools.installed import share_dirs
 from estimation_nodes.tools.live_view import LiveViewError, parse_address
 from estimation_nodes.tools.recording import RecordingError
@@ -277,8 +282,6 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from estimation_nodes.nodes.process import PARENT_PID_ENV, ignore_further_interrupts
-
     processes: dict[str, subprocess.Popen] = {}
     rclpy.init()
     executor = SingleThreadedExecutor()
@@ -302,23 +305,15 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
                     deadline - time.monotonic())
                 if any(p.poll() is not None for p in processes.values()):
                     break
-            command = [sys.executable, "-m", NODE_MODULES[name],
-                       "--ros-args", "--params-file", str(params)]
-            if name == "motion_commander":
-                command += commander_overrides(args.settle, exit_when_done=True)
-            # The children end with the demo even if it is killed (nodes/process.end_with_parent).
-            # Each in a process group of its own: a terminal's Ctrl-C then reaches the demo
-            # alone, which stops each child with exactly one SIGINT.
-            processes[name] = subprocess.Popen(
-                command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())}, process_group=0)
+            overrides = (commander_overrides(args.settle, exit_when_done=True)
+                         if name == "motion_commander" else [])
+            processes[name] = start_node(NODE_MODULES[name], params, *overrides)
         code = run_until_done(executor, processes, "motion_commander", deadline, args.linger)
     except KeyboardInterrupt:
         print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
         code = 130
     finally:
-        ignore_further_interrupts()
-        for process in reversed(processes.values()):
-            stop_process(process)
+        stop_children(processes.values())
         if monitor is not None:
             monitor.destroy_node()
         close_sinks(sinks)

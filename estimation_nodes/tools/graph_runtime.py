@@ -1,11 +1,15 @@
-"""Running a graph from a script or a test: spin until something holds, end a child process."""
+"""Running a graph from a script or a test: spin until something holds, start and end child
+node processes."""
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
+import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any
 
 
@@ -30,6 +34,32 @@ def stop_process(process: subprocess.Popen, grace: float = 5.0) -> int:
             process.kill()
             process.wait()
     return process.returncode
+
+
+def start_node(module: str, params: Path, *overrides: str) -> subprocess.Popen:
+    """One of the package's nodes (``python -m module``) as a child of this process, with
+    its parameter file and ``overrides`` (ROS arguments).
+
+    The child ends with this process even if it is killed (nodes/process.end_with_parent),
+    and runs in a process group of its own: a terminal's Ctrl-C then reaches this process
+    alone, which stops each child with exactly one SIGINT (``stop_children``).
+    """
+    from estimation_nodes.nodes.process import PARENT_PID_ENV
+
+    command = [sys.executable, "-m", module, "--ros-args", "--params-file", str(params),
+               *overrides]
+    return subprocess.Popen(command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())},
+                            process_group=0)
+
+
+def stop_children(processes: Iterable[subprocess.Popen]) -> None:
+    """End the children started with ``start_node``, the last started first, once further
+    Ctrl-Cs no longer interrupt this process's own shutdown."""
+    from estimation_nodes.nodes.process import ignore_further_interrupts
+
+    ignore_further_interrupts()
+    for process in reversed(list(processes)):
+        stop_process(process)
 
 
 def run_until_done(executor: Any, processes: dict[str, subprocess.Popen], main: str,

@@ -11,7 +11,6 @@ summary, and records every topic with ``--record``.
 from __future__ import annotations
 
 import math
-import os
 import subprocess
 import sys
 import time
@@ -19,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from estimation_nodes.params import topics
-from estimation_nodes.tools.graph_runtime import run_until_done, stop_process
+from estimation_nodes.tools.graph_runtime import run_until_done, start_node, stop_children
 
 NODE_MODULES = {"grid_localizer": "estimation_nodes.nodes.grid_localizer",
                 "planar_robot": "estimation_nodes.nodes.planar_robot"}
@@ -131,8 +130,6 @@ def run(params: Path, args, sinks: list) -> tuple[int, GridRecord]:
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
 
-    from estimation_nodes.nodes.process import PARENT_PID_ENV, ignore_further_interrupts
-
     processes: dict[str, subprocess.Popen] = {}
     rclpy.init()
     executor = SingleThreadedExecutor()
@@ -141,21 +138,15 @@ def run(params: Path, args, sinks: list) -> tuple[int, GridRecord]:
     code = 0
     try:
         deadline = time.monotonic() + args.timeout
-        for name in ("grid_localizer", "planar_robot"):
-            command = [sys.executable, "-m", NODE_MODULES[name], "--ros-args",
-                       "--params-file", str(params)]
-            if name == "planar_robot":
-                command += ["-p", "exit_when_done:=true"]
-            processes[name] = subprocess.Popen(
-                command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())}, process_group=0)
+        processes["grid_localizer"] = start_node(NODE_MODULES["grid_localizer"], params)
+        processes["planar_robot"] = start_node(NODE_MODULES["planar_robot"], params,
+                                               "-p", "exit_when_done:=true")
         code = run_until_done(executor, processes, "planar_robot", deadline, args.linger)
     except KeyboardInterrupt:
         print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
         code = 130
     finally:
-        ignore_further_interrupts()
-        for process in reversed(processes.values()):
-            stop_process(process)
+        stop_children(processes.values())
         monitor.node.destroy_node()
         executor.shutdown()
         rclpy.try_shutdown()
