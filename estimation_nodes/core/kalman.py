@@ -185,7 +185,12 @@ def corrected_mean(
     """x' = x + K (z - C x) of Eq. 6.36 and the normalized innovation squared
     y' S^-1 y of y = z - C x; raises ValueError for a ``z`` of the wrong size
     (InputSizeError) or with NaN or inf."""
-    z_vec = _as_vector("z", z, model.measurement_size)
+    return _corrected_mean(x, _as_vector("z", z, model.measurement_size), gain, model)
+
+
+def _corrected_mean(
+    x: FloatArray, z_vec: FloatArray, gain: CorrectionGain, model: LinearGaussianModel
+) -> tuple[FloatArray, float]:
     innovation = z_vec - model.C.dot(x)
     x_new = x + gain.K.dot(innovation)
     if gain.S_inv is not None:
@@ -213,9 +218,9 @@ def correct_with_nis(
     x: FloatArray, P: FloatArray, z: object, model: LinearGaussianModel
 ) -> tuple[FloatArray, FloatArray, FloatArray, float]:
     """``correct`` and the normalized innovation squared of ``z``: ``(x, P, K, nis)``."""
-    _as_vector("z", z, model.measurement_size)   # a bad z raises before any work
+    z_vec = _as_vector("z", z, model.measurement_size)   # a bad z raises before any work
     gain = correction_gain(P, model)
-    x_new, nis = corrected_mean(x, z, gain, model)
+    x_new, nis = _corrected_mean(x, z_vec, gain, model)
     return x_new, gain.P, gain.K, nis
 
 

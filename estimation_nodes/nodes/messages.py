@@ -9,7 +9,7 @@ import numpy as np
 from geometry_msgs.msg import PoseWithCovariance
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
-from estimation_nodes.nodes.wire import pose_numbers
+from estimation_nodes.nodes.wire import pose_numbers, state_dims
 
 
 def _multiarray(values: np.ndarray, dims: list[MultiArrayDimension]) -> Float64MultiArray:
@@ -36,11 +36,9 @@ def to_multiarray(values: np.ndarray, label: str) -> Float64MultiArray:
 def to_state_message(x: np.ndarray, P: np.ndarray) -> Float64MultiArray:
     """A Kalman state x (n) and its covariance P (n x n) in one message, so they never come
     apart: an (n + 1) x n array whose row 0 is x and rows 1..n are P, as its labels say."""
-    n = x.size
     return _multiarray(np.concatenate([x, P.ravel()]), [
-        MultiArrayDimension(label=f"row 0: x, rows 1-{n}: P", size=n + 1, stride=(n + 1) * n),
-        MultiArrayDimension(label="state component", size=n, stride=n),
-    ])
+        MultiArrayDimension(label=label, size=size, stride=stride)
+        for label, size, stride in state_dims(x.size)])
 
 
 def from_state_message(msg: Float64MultiArray) -> tuple[np.ndarray, np.ndarray]:
