@@ -124,13 +124,13 @@ class RunMonitor(Node):
         resolved = self.resolve_topic_name(topic)
 
         def on_raw(data: bytes, info: dict) -> None:
-            if self._sinks:
-                received = time.time_ns()
-                published = info.get("source_timestamp") or received
-                for sink in self._sinks:
-                    sink.write(resolved, data, received, published)
+            received = time.time_ns()
+            published = info.get("source_timestamp") or received
+            for sink in self._sinks:
+                sink.write(resolved, data, received, published)
             if handle is not None:
                 handle(deserialize_message(data, msg_type))
+                self.record.stamp(topic, published)
 
         return on_raw
 
@@ -138,9 +138,11 @@ class RunMonitor(Node):
         if not self._quiet:
             print(text, flush=True)
 
-    def _truth_note(self, step: int, size: int) -> str:
+    def _truth_note(self, size: int) -> str:
+        """The step's truth: the last one published before the estimate being shown (the
+        estimator can republish an estimate, so counting estimates would drift)."""
         truth = self.record.truth
-        return f"(true cell {truth[step] % size})" if step < len(truth) else ""
+        return f"(true cell {truth[-1] % size})" if truth else ""
 
     def _on_predicted(self, msg) -> None:
         belief = np.frombuffer(msg.data, dtype=np.float64).copy()
@@ -150,19 +152,17 @@ class RunMonitor(Node):
     def _on_corrected(self, msg) -> None:
         belief = np.frombuffer(msg.data, dtype=np.float64).copy()
         self.record.corrected.append(belief)
-        step = len(self.record.corrected) - 1
-        self._say(f"step {step + 1:3d}  corrected  {bars(belief)}  most likely cell "
-                  f"{int(np.argmax(belief))} {self._truth_note(step, belief.size)}")
+        self._say(f"step {len(self.record.truth):3d}  corrected  {bars(belief)}  most likely "
+                  f"cell {int(np.argmax(belief))} {self._truth_note(belief.size)}")
 
     def _on_state(self, msg) -> None:
         x, P = from_state_message(msg)
         self.record.states.append((x, P))
         if x.size == 1:   # the 1-D filter: kalman_estimate says it all
             return
-        step = len(self.record.states) - 1
         truth = self.record.true_states
-        note = f"true {np.array2string(truth[step], precision=3)}" if step < len(truth) else ""
-        self._say(f"step {step + 1:3d}  kalman     x = {np.array2string(x, precision=3)}  "
+        note = f"true {np.array2string(truth[-1], precision=3)}" if truth else ""
+        self._say(f"step {len(truth):3d}  kalman     x = {np.array2string(x, precision=3)}  "
                   f"std = {np.array2string(np.sqrt(np.diag(P)), precision=3)}  {note}")
 
     def _on_kalman(self, msg) -> None:
@@ -170,8 +170,7 @@ class RunMonitor(Node):
         self.record.kalman.append((x, var))
         if self.record.true_states:
             return   # a matrix run: printed from kalman_state
-        step = len(self.record.kalman) - 1
         truth = self.record.truth
-        note = f"(true position {truth[step]})" if step < len(truth) else ""
-        self._say(f"step {step + 1:3d}  kalman     x = {x:.6f}  var = {var:.6f}  "
+        note = f"(true position {truth[-1]})" if truth else ""
+        self._say(f"step {len(truth):3d}  kalman     x = {x:.6f}  var = {var:.6f}  "
                   f"std = {np.sqrt(var):.6f}  {note}")

@@ -18,7 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation_nodes.tools.run_record import RunRecord
+from estimation_nodes.params import topics
+from estimation_nodes.tools.run_record import OUTPUT_LISTS, RunRecord
 
 #: Pixel size of every picture: 16 x 12 inches at 100 dpi.
 FIGURE_INCHES = (16.0, 12.0)
@@ -32,15 +33,23 @@ def _chosen_steps(count: int) -> list[int]:
     return sorted({int(round(i)) for i in np.linspace(0, count - 1, MAX_PANELS)})
 
 
-def _belief_panel(ax, record: RunRecord, step: int) -> None:
+def _settled(record: RunRecord, topic: str) -> dict[int, int]:
+    """Step -> index of the estimate on ``topic`` that settled it; in arrival order
+    when the run has no truth to count steps by."""
+    if record.truth or record.true_states:
+        return record.per_step(topic)
+    return {index: index for index in range(len(getattr(record, OUTPUT_LISTS[topic])))}
+
+
+def _belief_panel(ax, record: RunRecord, step: int, corrected: int) -> None:
     cells = np.arange(record.cells)
     width = 0.4
-    if step < len(record.predicted):
-        ax.bar(cells - width / 2, record.predicted[step], width, color="#9ecae1",
+    predicted = record.prediction_before(topics.BELIEF, corrected, topics.BELIEF_PREDICTED)
+    if predicted is not None:
+        ax.bar(cells - width / 2, record.predicted[predicted], width, color="#9ecae1",
                label="predicted")
-    if step < len(record.corrected):
-        ax.bar(cells + width / 2, record.corrected[step], width, color="#08519c",
-               label="corrected")
+    ax.bar(cells + width / 2, record.corrected[corrected], width, color="#08519c",
+           label="corrected")
     if step < len(record.truth):
         true_cell = record.truth[step] % record.cells
         ax.axvline(true_cell, color="#d62728", linewidth=1.5, linestyle="--", label="true cell")
@@ -52,24 +61,23 @@ def _belief_panel(ax, record: RunRecord, step: int) -> None:
 
 
 def _kalman_panel(ax, record: RunRecord) -> None:
-    if not record.kalman:
+    settled = _settled(record, topics.KALMAN_ESTIMATE)
+    if not settled:
         ax.text(0.5, 0.5, "no Kalman estimates in this run", ha="center", va="center",
                 transform=ax.transAxes)
         return
-    steps = np.arange(1, len(record.kalman) + 1)
-    x = np.array([k[0] for k in record.kalman])
-    sigma = np.sqrt([k[1] for k in record.kalman])
+    steps = np.array(list(settled)) + 1
+    x = np.array([record.kalman[i][0] for i in settled.values()])
+    sigma = np.sqrt([record.kalman[i][1] for i in settled.values()])
     ax.fill_between(steps, x - 2 * sigma, x + 2 * sigma, color="#c6dbef",
                     label="estimate +- 2 sigma")
     ax.plot(steps, x, color="#08519c", marker="o", label="Kalman estimate")
     if record.measurements:
-        count = min(len(record.measurements), len(steps))
-        ax.plot(steps[:count], record.measurements[:count], "x", color="#ff7f0e",
-                label="measurement")
+        ax.plot(np.arange(1, len(record.measurements) + 1), record.measurements, "x",
+                color="#ff7f0e", label="measurement")
     if record.truth:
-        count = min(len(record.truth), len(steps))
-        ax.plot(steps[:count], record.truth[:count], color="#d62728", linestyle="--",
-                label="truth")
+        ax.plot(np.arange(1, len(record.truth) + 1), record.truth, color="#d62728",
+                linestyle="--", label="truth")
     ax.set_xlabel("step")
     ax.set_ylabel("position (cells, unwrapped)")
     ax.legend(loc="upper left", fontsize=9)
@@ -109,13 +117,13 @@ def _tracking_panels(figure, record: RunRecord) -> None:
     track.legend(loc="best", fontsize=9)
     track.grid(alpha=0.3)
     errors = figure.add_subplot(1, 2, 2)
-    steps = np.arange(1, len(record.states) + 1)
+    settled = _settled(record, topics.KALMAN_STATE)
+    steps = np.array(list(settled)) + 1
     if record.true_states:
-        count = min(len(record.states), len(record.true_states))
-        error = [np.linalg.norm(record.states[i][0][:2] - record.true_states[i][:2])
-                 for i in range(count)]
-        errors.plot(steps[:count], error, color="#08519c", label="|estimate - truth|")
-    sigma = [np.sqrt(np.trace(P[:2, :2])) for _, P in record.states]
+        error = [np.linalg.norm(record.states[i][0][:2] - record.true_states[step][:2])
+                 for step, i in settled.items()]
+        errors.plot(steps, error, color="#08519c", label="|estimate - truth|")
+    sigma = [np.sqrt(np.trace(record.states[i][1][:2, :2])) for i in settled.values()]
     errors.plot(steps, sigma, color="#6baed6", linestyle=":", label="sqrt(trace P), position")
     errors.set_xlabel("step")
     errors.set_ylabel("position error")
@@ -138,9 +146,11 @@ def render(record: RunRecord, output: Path) -> Path:
                         fontsize=13)
         return _save(figure, output, plt)
     grid = figure.add_gridspec(4, 4, height_ratios=[1, 1, 1, 1.6], hspace=0.45, wspace=0.25)
-    steps = _chosen_steps(max(len(record.predicted), len(record.corrected)))
+    settled = _settled(record, topics.BELIEF)
+    steps = [list(settled)[i] for i in _chosen_steps(len(settled))]
     for panel, step in enumerate(steps):
-        _belief_panel(figure.add_subplot(grid[panel // 4, panel % 4]), record, step)
+        _belief_panel(figure.add_subplot(grid[panel // 4, panel % 4]), record, step,
+                      settled[step])
     if not steps:
         ax = figure.add_subplot(grid[0, :])
         ax.text(0.5, 0.5, "no histogram beliefs in this run", ha="center", va="center")

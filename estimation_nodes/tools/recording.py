@@ -129,8 +129,9 @@ def _base(topic: str) -> str:
     return topic.rsplit("/", 1)[-1]
 
 
-def _add_decoded(record: RunRecord, topic: str, msg: Any) -> None:
+def _add_decoded(record: RunRecord, topic: str, msg: Any, publish_time_ns: int) -> None:
     base = _base(topic)
+    record.stamp(base, publish_time_ns)
     if base in topics.INPUTS:
         record.add_event(base, tuple(msg.data) if hasattr(msg, "layout") else msg.data)
     elif base == topics.TRUE_POSITION:
@@ -178,9 +179,9 @@ def read_recording(path: Path) -> Recording:
                         for _schema, channel, message, decoded
                         in reader.iter_decoded_messages(log_time_order=True)]
             messages.sort(key=lambda item: item[:2])
-            for _publish, _log, topic, decoded in messages:
+            for publish_time, _log, topic, decoded in messages:
                 counts[topic] = counts.get(topic, 0) + 1
-                _add_decoded(record, topic, decoded)
+                _add_decoded(record, topic, decoded, publish_time)
             for entry in reader.iter_metadata():
                 if entry.name == METADATA_NAME:
                     metadata = dict(entry.metadata)

@@ -6,6 +6,7 @@ plot and the offline replay work from one.
 
 from __future__ import annotations
 
+from bisect import bisect_right
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,6 +37,13 @@ class RunRecord:
     #: class), ("position_measurement", z), ("kalman_input", u) or ("kalman_measurement", z)
     #: (vectors as tuples).
     events: list[tuple[str, object]] = field(default_factory=list)
+    #: Source timestamps (ns) of each topic's messages, in the order of its list above;
+    #: a topic without them (a record built by hand) is paired by position.
+    stamps: dict[str, list[int]] = field(default_factory=dict)
+
+    def stamp(self, topic: str, source_ns: int) -> None:
+        """Keep the source timestamp of the message just added to ``topic``'s list."""
+        self.stamps.setdefault(topic, []).append(source_ns)
 
     def add_event(self, topic: str, value: object) -> None:
         """Keep an input both in its topic's list and in the common event order."""
@@ -50,6 +58,44 @@ class RunRecord:
         beliefs = self.corrected or self.predicted
         return int(beliefs[0].size) if beliefs else 0
 
+    def per_step(self, topic: str) -> dict[int, int]:
+        """Step -> index in ``topic``'s list of the estimate that settled that step.
+
+        A step is one true position (or true state) of the simulator, published
+        just before the reading it causes. Its estimate is the last one on
+        ``topic`` published after it and before the next step's truth. The n-th
+        estimate is not always the n-th step's: the estimator republishes an
+        estimate when an input arrives late, so the source timestamps decide.
+        """
+        values = getattr(self, OUTPUT_LISTS[topic])
+        truth_topic = topics.TRUE_STATE if self.true_states else topics.TRUE_POSITION
+        steps = len(self.true_states or self.truth)
+        value_stamps, step_stamps = self.stamps.get(topic, []), self.stamps.get(truth_topic, [])
+        if len(value_stamps) != len(values) or len(step_stamps) != steps:
+            return {index: index for index in range(min(len(values), steps))}
+        settled = {}
+        for index, stamp in enumerate(value_stamps):
+            step = bisect_right(step_stamps, stamp) - 1
+            if step >= 0:   # one published before the first truth is no step's
+                settled[step] = index
+        return settled
+
+    def prediction_before(self, topic: str, index: int, predicted_topic: str) -> int | None:
+        """Index of the last prediction on ``predicted_topic`` published before the
+        estimate ``index`` of ``topic``: the prediction that correction started from."""
+        stamps = self.stamps.get(predicted_topic, [])
+        predicted = getattr(self, OUTPUT_LISTS[predicted_topic])
+        if len(stamps) != len(predicted) or len(self.stamps.get(topic, [])) <= index:
+            return index if index < len(predicted) else None
+        before = bisect_right(stamps, self.stamps[topic][index]) - 1
+        return before if before >= 0 else None
+
+
+#: The RunRecord list that holds each estimator output.
+OUTPUT_LISTS = {topics.BELIEF: "corrected", topics.BELIEF_PREDICTED: "predicted",
+                topics.KALMAN_ESTIMATE: "kalman", topics.KALMAN_STATE: "states",
+                topics.KALMAN_STATE_PREDICTED: "states_predicted"}
+
 
 def summarize(record: RunRecord) -> str:
     """A few lines a person reads at a glance: counts, final estimates, how often right."""
@@ -61,25 +107,28 @@ def summarize(record: RunRecord) -> str:
         final = record.corrected[-1]
         lines.append(f"  final belief: most likely cell {int(np.argmax(final))} "
                      f"(p = {final.max():.6f})")
-        steps = min(len(record.corrected), len(record.truth))
-        if steps:
-            hits = [int(np.argmax(record.corrected[i])) == record.truth[i] % final.size
-                    for i in range(steps)]
-            lines.append(f"  most likely cell == true cell in {sum(hits)} of {steps} steps")
+        settled = record.per_step(topics.BELIEF)
+        if settled:
+            hits = [int(np.argmax(record.corrected[index])) == record.truth[step] % final.size
+                    for step, index in settled.items()]
+            lines.append(f"  most likely cell == true cell in {sum(hits)} of {len(hits)} steps")
     if record.kalman and not record.true_states:
         x, var = record.kalman[-1]
         lines.append(f"  final Kalman estimate {x:.6f} +- {np.sqrt(var):.6f} (1 std)")
-        steps = min(len(record.kalman), len(record.truth))
-        if steps:
-            errors = [record.kalman[i][0] - record.truth[i] for i in range(steps)]
+        settled = record.per_step(topics.KALMAN_ESTIMATE)
+        if settled:
+            errors = [record.kalman[index][0] - record.truth[step]
+                      for step, index in settled.items()]
             lines.append(f"  Kalman RMS error {np.sqrt(np.mean(np.square(errors))):.6f} cells "
-                         f"over {steps} steps")
+                         f"over {len(errors)} steps")
     if record.states and record.true_states:
-        steps = min(len(record.states), len(record.true_states))
-        errors = [record.states[i][0] - record.true_states[i] for i in range(steps)]
-        rms = np.sqrt(np.mean(np.square(errors), axis=0))
+        settled = record.per_step(topics.KALMAN_STATE)
         lines.append(f"  Kalman corrections {len(record.states)}; final state "
                      f"{np.array2string(record.states[-1][0], precision=4)}")
-        lines.append(f"  RMS error per state component over {steps} steps: "
-                     f"{np.array2string(rms, precision=4)}")
+        if settled:
+            errors = [record.states[index][0] - record.true_states[step]
+                      for step, index in settled.items()]
+            rms = np.sqrt(np.mean(np.square(errors), axis=0))
+            lines.append(f"  RMS error per state component over {len(errors)} steps: "
+                         f"{np.array2string(rms, precision=4)}")
     return "\n".join(lines)

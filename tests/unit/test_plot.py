@@ -54,3 +54,11 @@ def test_long_runs_show_at_most_twelve_evenly_spread_steps():
     steps = _chosen_steps(40)
     assert len(steps) == 12 and steps[0] == 0 and steps[-1] == 39
     assert np.all(np.diff(steps) > 0)
+
+
+def test_render_draws_each_step_s_settled_belief_when_one_was_republished(tmp_path):
+    from tests.unit.test_run_record import localizing_run_with_a_republication
+
+    record = localizing_run_with_a_republication()
+    width, height, size = png_size(render(record, tmp_path / "republished.png"))
+    assert (width, height) == (1600, 1200) and size > 20_000
