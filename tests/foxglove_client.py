@@ -87,17 +87,25 @@ class FoxgloveClient:
             {"id": sub_id, "channelId": self.channels[topic]["id"]}
             for sub_id, topic in new.items()]}))
 
-    async def receive(self, count: dict[str, int], timeout: float) -> list[Received]:
-        """Message data until ``count[topic]`` messages of each topic came, or ``timeout``."""
+    async def receive(self, count: dict[str, int], timeout: float,
+                      quiet: float = 0.0) -> list[Received]:
+        """Message data until ``count[topic]`` messages of each topic came, or ``timeout``;
+        then more, until none came for ``quiet`` seconds (an estimate republished after a
+        late input can follow the count)."""
         received: list[Received] = []
         deadline = time.monotonic() + timeout
 
         def done() -> bool:
             return all(sum(r.topic == t for r in received) >= n for t, n in count.items())
 
-        while not done() and time.monotonic() < deadline:
+        while time.monotonic() < deadline:
+            wait = deadline - time.monotonic()
+            if done():
+                if quiet <= 0.0:
+                    break
+                wait = min(wait, quiet)
             try:
-                frame = await asyncio.wait_for(self.ws.recv(), deadline - time.monotonic())
+                frame = await asyncio.wait_for(self.ws.recv(), wait)
             except (TimeoutError, websockets.ConnectionClosed):
                 break
             if isinstance(frame, bytes):

@@ -75,7 +75,7 @@ def test_an_independent_client_decodes_the_beliefs_the_demo_printed(ros_env, pro
     async def watch():
         client = await FoxgloveClient.connect(f"ws://127.0.0.1:{port}", timeout=60)
         await client.subscribe(["/belief"])
-        received = await client.receive({"/belief": 3}, timeout=120)
+        received = await client.receive({"/belief": 3}, timeout=120, quiet=2.0)
         await client.close()
         return client, received
 
@@ -85,7 +85,8 @@ def test_an_independent_client_decodes_the_beliefs_the_demo_printed(ros_env, pro
     decode = client.decoder("/belief")
     beliefs = [list(decode(r.payload).data) for r in received if r.topic == "/belief"]
     printed = printed_beliefs(output)
-    assert len(beliefs) == len(printed) == 3, output
+    # Three steps; a belief republished after a late input would be a fourth, in both.
+    assert len(beliefs) == len(printed) >= 3, output
     np.testing.assert_allclose(beliefs, printed, atol=1e-6)
     np.testing.assert_allclose(beliefs[-1], BOOK_FINAL_BELIEF, atol=1e-6)
     assert {t: c["schemaName"] for t, c in client.channels.items()} == SERVED
@@ -119,7 +120,7 @@ def test_foxglove_view_serves_a_graph_it_did_not_start_and_stops_on_ctrl_c(ros_e
         client = await FoxgloveClient.connect(url)
         await client.subscribe(["/robot1/belief"])
         commander = start_graph_in(processes, "/robot1")
-        received = await client.receive({"/robot1/belief": 3}, timeout=120)
+        received = await client.receive({"/robot1/belief": 3}, timeout=120, quiet=2.0)
         await client.close()
         return client, received, commander
 
@@ -127,7 +128,7 @@ def test_foxglove_view_serves_a_graph_it_did_not_start_and_stops_on_ctrl_c(ros_e
     assert commander.wait(timeout=60) == 0
     decode = client.decoder("/robot1/belief")
     beliefs = [list(decode(r.payload).data) for r in received]
-    assert len(beliefs) == 3
+    assert len(beliefs) >= 3   # more when one was republished after a late input
     np.testing.assert_allclose(beliefs[-1], BOOK_FINAL_BELIEF, atol=1e-6)
     # Names as the nodes resolve them: the namespace and the remap apply, /diagnostics
     # is absolute.
