@@ -128,6 +128,9 @@ class KalmanFilter:
         self._model = model
         self.last_nis = float("nan")
         self._prepared: _PreparedSteps | None = None
+        #: The kinds of the last two steps ("predict", "correct"), oldest first: what
+        #: prepare() takes the next one to be.
+        self._recent_steps: tuple[str, ...] = ()
         self.reset()
 
     def reconfigure(
@@ -174,6 +177,7 @@ class KalmanFilter:
         """Predict with an input ``u`` (a number, or m values); raises ValueError (wrong
         size, non-finite u, or a result that would not be finite) and then changes nothing."""
         model = self._model
+        self._note_step("predict")
         if isinstance(model, ScalarKalmanModel):
             x, var = kalman.predict_scalar(
                 float(self.x[0]), float(self.P[0, 0]), _one("u", u), model.var_u)
@@ -188,6 +192,7 @@ class KalmanFilter:
         """Correct with a measurement ``z`` (a number, or p values); raises ValueError (wrong
         size, non-finite z, or a result that would not be finite) and then changes nothing."""
         model = self._model
+        self._note_step("correct")
         if isinstance(model, ScalarKalmanModel):
             x, var = float(self.x[0]), float(self.P[0, 0])
             z = _one("z", z)
@@ -205,16 +210,27 @@ class KalmanFilter:
         """Compute now what the next step will do to P: neither step's covariance depends
         on its input, so that step is then only the update of x. For a node to call
         while it waits for the next input (after publishing): the input's answer goes
-        out sooner. Both steps are prepared, since either may come next: one of them
-        for nothing. The results are the same as without it; a scalar filter has nothing
-        to prepare, and a failure here is left for the step itself to report."""
-        if isinstance(self._model, LinearGaussianModel):
-            with _overflow_checked_by_commit():
-                try:
+        out sooner. The step prepared is the one the last two foretell (the kind before
+        the last: inputs and measurements that alternate, or a run of either); before
+        two steps, both. A wrong guess costs nothing but the work: the step then
+        computes its own covariance, and the results are the same as without it. A
+        scalar filter has nothing to prepare, and a failure here is left for the step
+        itself to report."""
+        if not isinstance(self._model, LinearGaussianModel):
+            return
+        expected = self._recent_steps[0] if len(self._recent_steps) == 2 else None
+        with _overflow_checked_by_commit():
+            try:
+                if expected != "correct":
                     self._predicted_covariance()
+                if expected != "predict":
                     self._correction_gain()
-                except ValueError:   # LinAlgError included; the step raises it again
-                    self._prepared = None
+            except ValueError:   # LinAlgError included; the step raises it again
+                self._prepared = None
+
+    def _note_step(self, kind: str) -> None:
+        """Remember the kind of a step being taken (taken or refused: it came)."""
+        self._recent_steps = (*self._recent_steps[-1:], kind)
 
     def _steps_for_current_state(self) -> _PreparedSteps:
         prepared = self._prepared

@@ -92,17 +92,49 @@ def test_a_preparation_that_cannot_be_finite_leaves_the_error_to_the_step():
     assert np.isfinite(kalman_filter.P).all()
 
 
-def test_without_prepare_each_step_computes_only_its_own_covariance(monkeypatch):
+def count_calls(monkeypatch):
+    """The names of the covariance steps, as the filter calls them."""
     calls = []
     for name in ("predicted_covariance", "correction_gain"):
         original = getattr(kalman, name)
         monkeypatch.setattr(kalman, name, lambda *args, _f=original, _n=name:
                             calls.append(_n) or _f(*args))
+    return calls
+
+
+def test_without_prepare_each_step_computes_only_its_own_covariance(monkeypatch):
+    calls = count_calls(monkeypatch)
     model = random_model(np.random.default_rng(8), 4, 2, 2, 2)
     kalman_filter = KalmanFilter(GaussianState(np.zeros(4), np.eye(4)), model)
     kalman_filter.predict([0.1, 0.2])
     kalman_filter.correct([1.0, 2.0])
     assert calls == ["predicted_covariance", "correction_gain"]
-    kalman_filter.prepare()   # both, for whichever step comes next
-    kalman_filter.correct([1.5, 2.5])
+    kalman_filter.prepare()   # alternating so far: a prediction comes next
+    assert calls[2:] == ["predicted_covariance"]
+    kalman_filter.correct([1.5, 2.5])   # it did not: the correction computes its own gain
     assert calls[2:] == ["predicted_covariance", "correction_gain"]
+
+
+@pytest.mark.parametrize("pattern, foreseen", [("pc", True), ("cc", True), ("pp", True),
+                                               ("ppc", False), ("pcc", False)])
+def test_prepare_follows_a_repeating_pattern_of_two_after_two_steps(monkeypatch, pattern,
+                                                                    foreseen):
+    """Alternating inputs and measurements (a tracker), or runs of one kind: after the
+    first two steps, each step finds its covariance prepared and computes none itself."""
+    calls = count_calls(monkeypatch)
+    model = random_model(np.random.default_rng(9), 4, 2, 2, 2)
+    kalman_filter = KalmanFilter(GaussianState(np.zeros(4), np.eye(4)), model)
+    steps = (pattern * 12)[:24]
+    computed_by_steps = []
+    for kind in steps:
+        kalman_filter.prepare()
+        before = len(calls)
+        if kind == "p":
+            kalman_filter.predict([0.1, 0.2])
+        else:
+            kalman_filter.correct([1.0, 2.0])
+        computed_by_steps.append(len(calls) - before)
+    if foreseen:   # a pattern of period one or two
+        assert computed_by_steps[2:] == [0] * 22
+    else:   # period three: the guess is wrong now and then, never the result
+        assert 0 < sum(computed_by_steps[2:]) < 22
