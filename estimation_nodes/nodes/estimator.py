@@ -145,8 +145,12 @@ class Estimator(Node):
             ]
         self._move_subscriptions = []
         for msg_type, topic, handler, rank in inputs:
+            # Vectors are taken raw and read by wire.multiarray_values: rclpy's message
+            # object, layout and all, cost more than the filter's use of the numbers.
+            raw = msg_type is Float64MultiArray
             subscription = self.create_subscription(
-                msg_type, topic, self._arrival(handler, rank), INPUT_QOS,
+                msg_type, topic, self._arrival(handler, rank, topic if raw else None),
+                INPUT_QOS, raw=raw,
                 event_callbacks=SubscriptionEventCallbacks(use_default_callbacks=False))
             self._watch_input_events(subscription, topic)
             if rank == MOVE:
@@ -214,11 +218,21 @@ class Estimator(Node):
 
     # --- events -----------------------------------------------------------------------------
 
-    def _arrival(self, handler: Any, rank: int) -> Any:
+    def _arrival(self, handler: Any, rank: int, raw_vector_topic: str | None = None) -> Any:
         """The subscription callback of one input: the message with when it happened, to
-        the causal order (or straight to ``handler`` when there is none)."""
+        the causal order (or straight to ``handler`` when there is none). For a raw
+        subscription (``raw_vector_topic``), the message is the numbers its bytes hold."""
+
+        read_vector = wire.MultiarrayReader()
 
         def on_message(msg: Any, info: dict) -> None:
+            if raw_vector_topic is not None:
+                try:
+                    msg = read_vector(msg)
+                except wire.MalformedMessageError as error:
+                    self._reject(f"malformed.{raw_vector_topic}",
+                                 f"{raw_vector_topic} dropped: {error}")
+                    return
             # The publisher's clock: the order of events across topics and hosts.
             stamp = info.get("source_timestamp") or info.get("received_timestamp") \
                 or time.time_ns()
@@ -296,8 +310,8 @@ class Estimator(Node):
             self._kalman_step(True, float(msg.data), topics.MOTION_CMD, first_time)
         return True
 
-    def _on_kalman_input(self, msg: Float64MultiArray, first_time: bool) -> bool:
-        return self._kalman_step(True, self._vector(msg), topics.KALMAN_INPUT, first_time)
+    def _on_kalman_input(self, u: np.ndarray, first_time: bool) -> bool:
+        return self._kalman_step(True, u, topics.KALMAN_INPUT, first_time)
 
     def _on_tile_observation(self, msg: String, first_time: bool) -> bool:
         try:
@@ -318,13 +332,8 @@ class Estimator(Node):
     def _on_position_measurement(self, msg: Float64, first_time: bool) -> bool:
         return self._kalman_step(False, msg.data, topics.POSITION_MEASUREMENT, first_time)
 
-    def _on_kalman_measurement(self, msg: Float64MultiArray, first_time: bool) -> bool:
-        return self._kalman_step(False, self._vector(msg), topics.KALMAN_MEASUREMENT,
-                                 first_time)
-
-    @staticmethod
-    def _vector(msg: Float64MultiArray) -> np.ndarray:
-        return np.frombuffer(msg.data, dtype=np.float64)
+    def _on_kalman_measurement(self, z: np.ndarray, first_time: bool) -> bool:
+        return self._kalman_step(False, z, topics.KALMAN_MEASUREMENT, first_time)
 
     def _kalman_step(self, predicted: bool, value: Any, topic: str, first_time: bool) -> bool:
         """One Kalman prediction (or correction) from ``topic``; the result published, or

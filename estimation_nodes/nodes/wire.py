@@ -88,13 +88,25 @@ def state(x: np.ndarray, P: np.ndarray) -> bytes:
 
 
 @lru_cache(maxsize=32)
-def _pose_selection(components: tuple[int, ...], n: int) -> tuple[np.ndarray, np.ndarray]:
-    """Where the chosen block of an n x n P goes among a pose's 43 numbers (3 position,
-    4 orientation, then the 6 x 6 covariance row-major): target and source indices."""
+def _pose_selection(components: tuple[int, ...], n: int) -> tuple[np.ndarray, ...]:
+    """Where the chosen parts of x (n) and P (n x n) go among a pose's 43 numbers (3
+    position, 4 orientation, then the 6 x 6 covariance row-major): position targets and
+    sources in x, covariance targets and sources in P raveled, and the rotation axes'
+    sources in x (empty when no component is a rotation)."""
     present = [(axis, c) for axis, c in enumerate(components) if c >= 0]
+    position = [(axis, c) for axis, c in present if axis < 3]
     targets = [7 + 6 * row + column for row, _ in present for column, _ in present]
     sources = [ci * n + cj for _, ci in present for _, cj in present]
-    return np.array(targets, dtype=np.intp), np.array(sources, dtype=np.intp)
+    rotations = [c for axis, c in present if axis >= 3]
+    return (np.array([axis for axis, _ in position], dtype=np.intp),
+            np.array([c for _, c in position], dtype=np.intp),
+            np.array(targets, dtype=np.intp), np.array(sources, dtype=np.intp),
+            np.array(rotations, dtype=np.intp))
+
+
+#: The pose of no rotation: identity quaternion (x, y, z, w) = (0, 0, 0, 1).
+_NO_ROTATION = np.zeros(43)
+_NO_ROTATION[6] = 1.0
 
 
 def pose_numbers(x: np.ndarray, P: np.ndarray, components: Sequence[int]) -> np.ndarray:
@@ -103,19 +115,20 @@ def pose_numbers(x: np.ndarray, P: np.ndarray, components: Sequence[int]) -> np.
     orientation as a quaternion, and the matching block of P in the covariance; axes
     without a component are 0."""
     chosen = tuple(components) + (-1,) * (len(POSE_AXES) - len(components))
-    state_values = x.tolist()
-    axes = [state_values[c] if c >= 0 else 0.0 for c in chosen]
-    numbers = np.zeros(43)
-    numbers[:3] = axes[:3]
-    numbers[3:7] = quaternion_from_rpy(*axes[3:])
-    targets, sources = _pose_selection(chosen, x.size)
+    position_targets, position_sources, targets, sources, rotations = _pose_selection(
+        chosen, x.size)
+    numbers = _NO_ROTATION.copy()
+    numbers[position_targets] = x[position_sources]
+    if rotations.size:
+        angles = [float(x[c]) if c >= 0 else 0.0 for c in chosen[3:]]
+        numbers[3:7] = quaternion_from_rpy(*angles)
     numbers[targets] = P.ravel()[sources]
     return numbers
 
 
 def pose_with_covariance(numbers: np.ndarray) -> bytes:
     """A geometry_msgs/PoseWithCovariance of ``pose_numbers``: all doubles, all aligned."""
-    return ENCAPSULATION + np.ascontiguousarray(numbers, dtype="<f8").tobytes()
+    return b"".join((ENCAPSULATION, memoryview(np.ascontiguousarray(numbers, dtype="<f8"))))
 
 
 @lru_cache(maxsize=16)
@@ -133,4 +146,79 @@ def pose_with_covariance_stamped(stamp_ns: int, frame_id: str, numbers: np.ndarr
     seconds, nanoseconds = divmod(stamp_ns, 1_000_000_000)
     return b"".join((ENCAPSULATION, struct.pack("<iI", seconds, nanoseconds),
                      _frame_id_and_padding(frame_id),
-                     np.ascontiguousarray(numbers, dtype="<f8").tobytes()))
+                     memoryview(np.ascontiguousarray(numbers, dtype="<f8"))))
+
+
+# --- inputs -------------------------------------------------------------------------------
+
+class MalformedMessageError(ValueError):
+    """Bytes that are not the serialized message they were sent as."""
+
+
+_U32 = {"<": struct.Struct("<I"), ">": struct.Struct(">I")}
+
+
+def multiarray_values(data: bytes) -> np.ndarray:
+    """The numbers of a serialized std_msgs/Float64MultiArray (read-only; its layout is
+    skipped). Either byte order of plain CDR; raises MalformedMessageError for bytes that
+    are not such a message."""
+    values, _prefix_length = _parse_multiarray(data)
+    return values
+
+
+def _parse_multiarray(data: bytes) -> tuple[np.ndarray, int]:
+    """The numbers, and how many bytes come before them."""
+    if len(data) < 4 or data[0] != 0 or data[1] not in (0, 1):
+        raise MalformedMessageError(
+            f"not a plain CDR message (encapsulation {bytes(data[:4]).hex() or 'missing'})")
+    order = "<" if data[1] == 1 else ">"
+    u32 = _U32[order].unpack_from
+    body = memoryview(data)[4:]
+    end = len(body)
+
+    def field(offset: int) -> tuple[int, int]:
+        offset += -offset % 4
+        if offset + 4 > end:
+            raise MalformedMessageError("the message ends inside its layout")
+        return u32(body, offset)[0], offset + 4
+
+    dims, offset = field(0)
+    if dims > end // 12:   # each dimension takes at least 12 bytes
+        raise MalformedMessageError(f"{dims} layout dimensions do not fit in {end} bytes")
+    for _ in range(dims):
+        label_length, offset = field(offset)
+        offset += label_length
+        _size, offset = field(offset)
+        _stride, offset = field(offset)
+    _data_offset, offset = field(offset)
+    count, offset = field(offset)
+    offset += -offset % 8
+    # Nothing may follow the numbers but the padding of the whole message to 4 bytes.
+    if not 0 <= end - (offset + 8 * count) < 4:
+        raise MalformedMessageError(
+            f"{count} numbers do not fit the {end - min(offset, end)} bytes after the layout")
+    return np.frombuffer(body, dtype=f"{order}f8", count=count, offset=offset), offset + 4
+
+
+class MultiarrayReader:
+    """``multiarray_values`` for the messages of one topic, quicker for a layout seen last.
+
+    A publisher sends its vectors in one layout (labels, sizes, count): everything
+    before the numbers is the same bytes each time. A message that starts with the
+    bytes of the last one parsed, and has its length, is read without parsing again.
+    """
+
+    __slots__ = ("_prefix", "_length", "_dtype")
+
+    def __init__(self) -> None:
+        self._prefix, self._length, self._dtype = b"", -1, np.dtype("<f8")
+
+    def __call__(self, data: bytes) -> np.ndarray:
+        prefix = self._prefix
+        if len(data) == self._length and data.startswith(prefix):
+            return np.frombuffer(data, dtype=self._dtype, offset=len(prefix))
+        values, prefix_length = _parse_multiarray(data)
+        if prefix_length + values.nbytes == len(data):   # no padding after the numbers
+            self._prefix, self._length = bytes(data[:prefix_length]), len(data)
+            self._dtype = values.dtype
+        return values

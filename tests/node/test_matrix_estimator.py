@@ -99,6 +99,23 @@ def test_a_bad_vector_is_dropped_counted_and_changes_nothing(tracker, topic, val
     assert out.count("kalman_state") == 0 and out.count("kalman_state_predicted") == 0
 
 
+@pytest.mark.parametrize("topic", ["kalman_input", "kalman_measurement"])
+def test_bytes_that_are_no_vector_are_dropped_counted_and_change_nothing(tracker, executor,
+                                                                          topic):
+    """The vector inputs are read from their raw bytes: a publisher that sends bytes of
+    its own (publish accepts them) is refused, not a crash, and the next vector works."""
+    estimator, out, send = tracker
+    before = (estimator._kalman.x.copy(), estimator._kalman.P.copy())
+    send(topic, b"\x00\x01\x00\x00\x05\x00\x00\x00")   # five dimensions, then nothing
+    assert estimator.rejected == {f"malformed.{topic}": 1}
+    np.testing.assert_array_equal(estimator._kalman.x, before[0])
+    np.testing.assert_array_equal(estimator._kalman.P, before[1])
+    send(topic, vector(0.5, 0.25))
+    assert estimator.handled[topic] == 1
+    answer = "kalman_state_predicted" if topic == "kalman_input" else "kalman_state"
+    assert spin_until(executor, lambda: out.count(answer) == 1, 5.0)
+
+
 def test_scalar_topics_do_not_drive_a_filter_of_other_sizes(tracker):
     estimator, out, send = tracker
     send("motion_cmd", Int32(data=1))   # predicts the histogram only: m = 2
