@@ -145,7 +145,7 @@ class Estimator(Node):
             ]
         self._move_subscriptions = []
         for msg_type, topic, handler, rank in inputs:
-            # Vectors are taken raw and read by wire.multiarray_values: rclpy's message
+            # Vectors are taken raw and read by a wire.MultiarrayReader: rclpy's message
             # object, layout and all, cost more than the filter's use of the numbers.
             raw = msg_type is Float64MultiArray
             subscription = self.create_subscription(
@@ -223,10 +223,10 @@ class Estimator(Node):
         the causal order (or straight to ``handler`` when there is none). For a raw
         subscription (``raw_vector_topic``), the message is the numbers its bytes hold."""
 
-        read_vector = wire.MultiarrayReader()
+        read_vector = wire.MultiarrayReader() if raw_vector_topic is not None else None
 
         def on_message(msg: Any, info: dict) -> None:
-            if raw_vector_topic is not None:
+            if read_vector is not None:
                 try:
                     msg = read_vector(msg)
                 except wire.MalformedMessageError as error:

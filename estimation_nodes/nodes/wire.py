@@ -88,20 +88,20 @@ def state(x: np.ndarray, P: np.ndarray) -> bytes:
 
 
 @lru_cache(maxsize=32)
-def _pose_selection(components: tuple[int, ...], n: int) -> tuple[np.ndarray, ...]:
+def _pose_selection(components: tuple[int, ...], n: int) -> tuple[
+        np.ndarray, np.ndarray, np.ndarray, np.ndarray, bool]:
     """Where the chosen parts of x (n) and P (n x n) go among a pose's 43 numbers (3
     position, 4 orientation, then the 6 x 6 covariance row-major): position targets and
-    sources in x, covariance targets and sources in P raveled, and the rotation axes'
-    sources in x (empty when no component is a rotation)."""
+    sources in x, covariance targets and sources in P raveled, and whether any component
+    is a rotation (else the orientation is the identity)."""
     present = [(axis, c) for axis, c in enumerate(components) if c >= 0]
     position = [(axis, c) for axis, c in present if axis < 3]
     targets = [7 + 6 * row + column for row, _ in present for column, _ in present]
     sources = [ci * n + cj for _, ci in present for _, cj in present]
-    rotations = [c for axis, c in present if axis >= 3]
     return (np.array([axis for axis, _ in position], dtype=np.intp),
             np.array([c for _, c in position], dtype=np.intp),
             np.array(targets, dtype=np.intp), np.array(sources, dtype=np.intp),
-            np.array(rotations, dtype=np.intp))
+            len(position) < len(present))
 
 
 #: The pose of no rotation: identity quaternion (x, y, z, w) = (0, 0, 0, 1).
@@ -115,11 +115,11 @@ def pose_numbers(x: np.ndarray, P: np.ndarray, components: Sequence[int]) -> np.
     orientation as a quaternion, and the matching block of P in the covariance; axes
     without a component are 0."""
     chosen = tuple(components) + (-1,) * (len(POSE_AXES) - len(components))
-    position_targets, position_sources, targets, sources, rotations = _pose_selection(
+    position_targets, position_sources, targets, sources, rotated = _pose_selection(
         chosen, x.size)
     numbers = _NO_ROTATION.copy()
     numbers[position_targets] = x[position_sources]
-    if rotations.size:
+    if rotated:
         angles = [float(x[c]) if c >= 0 else 0.0 for c in chosen[3:]]
         numbers[3:7] = quaternion_from_rpy(*angles)
     numbers[targets] = P.ravel()[sources]
