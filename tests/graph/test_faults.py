@@ -115,7 +115,10 @@ def test_estimator_killed_and_restarted_comes_back_from_initial_state(
     started["estimator"].kill()   # a crash, not a clean stop
     started["estimator"].wait(timeout=10)
     restarted_ns = time.time_ns()
-    restarted = processes(node_command("estimator", LOCALIZATION))
+    # Its outputs keep every belief: this test's collector may match the new estimator
+    # after its first beliefs went out (seen under load), and with the default history
+    # of one it would get only the latest of them, not the first from its prior.
+    restarted = processes(node_command("estimator", LOCALIZATION, "-p", "history_depth:=1000"))
     wait_for_commander(executor, started, timeout=60.0)
     wait_seconds(executor, 1.0)
     assert restarted.poll() is None and started["tile_sensor"].poll() is None
