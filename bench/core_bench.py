@@ -31,7 +31,7 @@ from estimation_nodes.core import (  # noqa: E402
     histogram,
     kalman,
 )
-from estimation_nodes.core.filter_state import KalmanFilter as RunningKalman  # noqa: E402
+from estimation_nodes.core.kalman.filter import KalmanFilter as RunningKalman  # noqa: E402
 from estimation_nodes.nodes.process_memory import keep_freed_memory  # noqa: E402
 
 

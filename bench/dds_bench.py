@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
-from estimation_nodes.tools.graph_runtime import stop_process  # noqa: E402
+from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
 WINDOW = 100

@@ -32,7 +32,7 @@ sys.path.insert(0, str(BENCH))
 from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
-from estimation_nodes.tools.graph_runtime import stop_process  # noqa: E402
+from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
 
 SCENARIO = BENCH.parent / "msgs_config" / "localization.yaml"
 STEPS = 40

@@ -127,7 +127,7 @@ def unread_socket(url: str) -> socket.socket:
 
 
 def one_run(source: list[str], setting: str, mcap: Path, env: dict) -> dict:
-    command = [sys.executable, "-m", "estimation_nodes.tools.demo", *source, "--quiet",
+    command = [sys.executable, "-m", "estimation_nodes.tools.demo.cli", *source, "--quiet",
                "--record", str(mcap)]
     if setting != "no live view":
         command += ["--foxglove", "127.0.0.1:0"]
@@ -212,7 +212,7 @@ def scenario_table(title: str, source: list[str], runs: int, env: dict, tmp: Pat
 
 def time_write(payload: bytes, clients: str) -> str:
     """LiveView.write of ``payload`` per call, with ``clients`` connected."""
-    from estimation_nodes.tools.live_view import LiveView
+    from estimation_nodes.tools.live_view.server import LiveView
 
     view = LiveView("127.0.0.1", 0, dict.fromkeys(SERVED, ARRAY))
     client = None

@@ -28,7 +28,7 @@ sys.path.insert(1, str(BENCH.parent))
 from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
-from estimation_nodes.tools.graph_runtime import spin_until, stop_process  # noqa: E402
+from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
 
 MAP = BENCH.parent / "maps" / "office.yaml"
 
@@ -52,10 +52,10 @@ def main() -> None:
     from rclpy.node import Node
     from sensor_msgs.msg import LaserScan
 
-    from estimation_nodes.core import planar
+    from estimation_nodes.core.sim import planar
     from estimation_nodes.nodes.grid_messages import fill_pose
     from estimation_nodes.nodes.qos import latched_qos
-    from estimation_nodes.params import maps
+    from estimation_nodes.params import map_files as maps
 
     localizer = subprocess.Popen(
         [sys.executable, "-m", "estimation_nodes.nodes.grid_localizer", "--ros-args", "-p",

@@ -27,8 +27,8 @@ from dds_bench import start  # noqa: E402
 from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
-from estimation_nodes.tools import graph_runtime  # noqa: E402
-from estimation_nodes.tools.graph_runtime import stop_process  # noqa: E402
+from estimation_nodes.tools.demo import graph_runtime  # noqa: E402
+from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
 

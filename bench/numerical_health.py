@@ -17,13 +17,10 @@ import time
 
 import numpy as np
 
-from estimation_nodes.core import (
-    HistogramModel,
-    LinearGaussianModel,
-    histogram,
-    kalman,
-    simulation,
-)
+from estimation_nodes.core import HistogramModel, LinearGaussianModel
+from estimation_nodes.core.kalman import linear as kalman
+from estimation_nodes.core.sim import draws as simulation
+from estimation_nodes.core.tiles import histogram
 
 
 def histogram_health(steps: int, seed: int = 1) -> dict:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from estimation_nodes.tools.graph_runtime import spin_until
+from estimation_nodes.tools.demo.graph_runtime import spin_until
 
 __all__ = ["spin_until"]
 
@@ -149,7 +149,7 @@ def processes(ros_env):
         return process
 
     yield start
-    from estimation_nodes.tools.graph_runtime import stop_process
+    from estimation_nodes.tools.demo.graph_runtime import stop_process
 
     for process in started:
         stop_process(process, grace=10.0)

@@ -1,15 +1,14 @@
-"""The filters as pure functions over validated models (numpy; numba for large worlds).
+"""The filters as pure functions over validated models (numpy, numba, scipy; never rclpy).
 
-models: validated, immutable models (world, sensor model, motion kernel, linear
-Gaussian system); histogram and kalman: the filter steps; compiled: numba
-kernels for large worlds; simulation: the simulated world's random draws;
-filter_state: running estimates advanced by the steps.
+tiles/: the book's histogram filter on a cyclic world of tiles; kalman/: the linear
+Kalman filter (scalar, fusion, matrix); grid/: grid localization on a map; sim/:
+what the simulators draw; causal_order: events applied in the order they happened;
+validation: the checks every model and step shares.
 
 Never imports rclpy: nodes, replay and tests share it (a test checks).
 """
 
-from estimation_nodes.core import histogram, kalman, simulation
-from estimation_nodes.core.models import (
+from estimation_nodes.core.validation import (
     GaussianState,
     HistogramModel,
     LinearGaussianModel,
@@ -25,7 +24,4 @@ __all__ = [
     "MotionKernel",
     "ScalarKalmanModel",
     "SensorModel",
-    "histogram",
-    "kalman",
-    "simulation",
 ]

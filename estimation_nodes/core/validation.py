@@ -5,7 +5,7 @@ message starts with the field's name, shows the bad value and says what was
 expected, so a node can pass the message straight to its user.
 
 The models are data only; the filter steps that use them live in
-:mod:`estimation_nodes.core.histogram` and :mod:`estimation_nodes.core.kalman`.
+:mod:`estimation_nodes.core.tiles.histogram` and :mod:`estimation_nodes.core.kalman.linear`.
 """
 
 from __future__ import annotations

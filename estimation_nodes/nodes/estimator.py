@@ -39,9 +39,10 @@ from rcl_interfaces.msg import SetParametersResult
 from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
 
-from estimation_nodes.core import histogram, kalman
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.kalman import linear as kalman
 from estimation_nodes.core.causal_order import CausalOrder, Submission
-from estimation_nodes.core.filter_state import (
+from estimation_nodes.core.kalman.filter import (
     HistogramFilter,
     KalmanFilter,
     NonFiniteResultError,
@@ -62,7 +63,7 @@ from estimation_nodes.nodes.rclpy_internals import (
     SubscriptionEvents,
 )
 from estimation_nodes.params import topics
-from estimation_nodes.params.builders import (
+from estimation_nodes.params.estimator import (
     HISTOGRAM_KEYS,
     EstimatorUpdate,
     build_estimator_settings,

@@ -29,8 +29,8 @@ from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
-from estimation_nodes.core import grid
-from estimation_nodes.core.grid_state import GridLocalization
+from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid.localization import GridLocalization
 from estimation_nodes.nodes.grid_messages import (
     covariance_3x3,
     finite_pose,
@@ -44,7 +44,7 @@ from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
 from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
-from estimation_nodes.params.maps import (
+from estimation_nodes.params.map_files import (
     MapError,
     build_grid_localizer_settings,
     occupancy_from_message,

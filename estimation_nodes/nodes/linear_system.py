@@ -15,14 +15,14 @@ import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
-from estimation_nodes.core import simulation
+from estimation_nodes.core.sim import draws as simulation
 from estimation_nodes.nodes.held_publisher import HeldPublisher, subscribe_when_ready
 from estimation_nodes.nodes.messages import to_multiarray
 from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.params.builders import build_linear_system_settings
+from estimation_nodes.params.estimator import build_linear_system_settings
 from estimation_nodes.params.specs import LINEAR_SYSTEM_SPECS
 from estimation_nodes.params.wording import plural
 

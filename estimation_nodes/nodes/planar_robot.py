@@ -22,13 +22,13 @@ from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import LaserScan
 
-from estimation_nodes.core import planar
+from estimation_nodes.core.sim import planar
 from estimation_nodes.nodes.grid_messages import fill_pose, occupancy_grid
 from estimation_nodes.nodes.parameters import ConfigurationError, declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.params.maps import (
+from estimation_nodes.params.map_files import (
     MapError,
     odometry_noise,
     planar_world,

@@ -14,7 +14,7 @@ from rclpy.node import Node
 
 from estimation_nodes.nodes.parameters import ConfigurationError
 from estimation_nodes.nodes.rclpy_internals import RCLError
-from estimation_nodes.params.files import check_params_file, params_files_in
+from estimation_nodes.params.param_files import check_params_file, params_files_in
 
 
 def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> int:

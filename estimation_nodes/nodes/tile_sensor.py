@@ -16,7 +16,7 @@ import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import Float64, Int32, Int64, String
 
-from estimation_nodes.core import simulation
+from estimation_nodes.core.sim import draws as simulation
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
 )
@@ -24,7 +24,7 @@ from estimation_nodes.nodes.held_publisher import HeldPublisher, subscribe_when_
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.params.builders import build_sensor_settings
+from estimation_nodes.params.estimator import build_sensor_settings
 from estimation_nodes.params.specs import SENSOR_SPECS
 
 class TileSensor(Node):

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from estimation_nodes.core import histogram
-from estimation_nodes.core.models import (
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.validation import (
     FloatArray,
     GaussianState,
     HistogramModel,

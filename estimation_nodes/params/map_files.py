@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 import yaml
 
-from estimation_nodes.core.grid import GridModel
+from estimation_nodes.core.grid.steps import GridModel
 
 #: OccupancyGrid cell values (nav_msgs): free, occupied, unknown.
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1
@@ -213,7 +213,7 @@ def sensor_field(values) -> SensorField:
 
 
 def odometry_noise(values):
-    from estimation_nodes.core.grid import OdometryNoise
+    from estimation_nodes.core.grid.steps import OdometryNoise
 
     return OdometryNoise(alpha1=values["alpha1"], alpha2=values["alpha2"],
                          alpha3=values["alpha3"], alpha4=values["alpha4"])
@@ -224,7 +224,7 @@ def planar_world(occupancy: OccupancyMap):
     the clearance keeps it off obstacles and out of unknown space."""
     from scipy.ndimage import distance_transform_edt
 
-    from estimation_nodes.core.planar import PlanarWorld
+    from estimation_nodes.core.sim.planar import PlanarWorld
 
     occupied = occupancy.cells >= OCCUPIED
     blocked = occupied | (occupancy.cells == UNKNOWN)

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
-from estimation_nodes.core.models import (
+from estimation_nodes.core.validation import (
     BOOK_CLASSES,
     BOOK_KERNEL,
     BOOK_SENSOR_MODEL,

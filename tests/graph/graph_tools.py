@@ -77,8 +77,8 @@ def settled(published, offline, atol: float):
     """The published beliefs that settled each offline one, asserting that every offline
     belief was published in order and that nothing published after the last of them is a
     belief the filter does not give (a provisional estimate, before a late event, is
-    followed by those that replace it: estimation_nodes.tools.replay.align)."""
-    from estimation_nodes.tools.replay import align
+    followed by those that replace it: estimation_nodes.tools.replay.estimator.align)."""
+    from estimation_nodes.tools.replay.estimator import align
 
     alignment = align(published, offline, atol)
     assert alignment.matched == len(offline), (

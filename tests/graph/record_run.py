@@ -17,8 +17,8 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 
 from estimation_nodes.params import topics
-from estimation_nodes.tools.monitor import RunMonitor
-from estimation_nodes.tools.recording import McapRunWriter
+from estimation_nodes.tools.demo.monitor import RunMonitor
+from estimation_nodes.tools.recording.mcap import McapRunWriter
 
 
 def main() -> None:

@@ -9,7 +9,8 @@ import yaml
 from diagnostic_msgs.msg import DiagnosticArray
 from std_msgs.msg import Float64, Float64MultiArray, Int32, Int64, String
 
-from estimation_nodes.core import HistogramModel, histogram
+from estimation_nodes.core import HistogramModel
+from estimation_nodes.core.tiles import histogram
 from estimation_nodes.nodes.qos import INPUT_QOS
 from tests.conftest import SCENARIOS, spin_until
 from tests.graph.graph_tools import (
@@ -174,7 +175,7 @@ def causal_corrections(events, model):
 def settles_on(published, offline) -> bool:
     """Whether every offline belief was published, in order, and nothing published after
     the last of them is a belief the filter does not give (see replay.align)."""
-    from estimation_nodes.tools.replay import align
+    from estimation_nodes.tools.replay.estimator import align
 
     alignment = align(published, offline, 1e-12)
     return alignment.matched == len(offline) and all(

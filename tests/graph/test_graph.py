@@ -14,7 +14,8 @@ import yaml
 from geometry_msgs.msg import PoseWithCovariance
 from std_msgs.msg import Float64MultiArray, Int64, String
 
-from estimation_nodes.core import HistogramModel, histogram
+from estimation_nodes.core import HistogramModel
+from estimation_nodes.core.tiles import histogram
 from estimation_nodes.nodes.qos import INPUT_QOS
 from tests.conftest import SCENARIOS, spin_until
 from tests.graph.graph_tools import (
@@ -194,7 +195,7 @@ def running(pid: int) -> bool:
 
 def start_demo(ros_env, *args, **popen_args) -> tuple[subprocess.Popen, list[int]]:
     """The demo as a process, once its three nodes are running: (demo, node pids)."""
-    demo = subprocess.Popen([sys.executable, "-m", "estimation_nodes.tools.demo", *args],
+    demo = subprocess.Popen([sys.executable, "-m", "estimation_nodes.tools.demo.cli", *args],
                             env=ros_env, **popen_args)
     deadline = time.monotonic() + 30
     while len(children_of(demo.pid)) < 3 and time.monotonic() < deadline:

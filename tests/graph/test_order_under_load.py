@@ -14,7 +14,7 @@ import sys
 
 import pytest
 
-from estimation_nodes.tools.graph_runtime import stop_process
+from estimation_nodes.tools.demo.graph_runtime import stop_process
 from tests.conftest import REPO, SCENARIOS
 from tests.graph.graph_tools import node_command
 from tests.graph.test_two_hosts import compared, replayed

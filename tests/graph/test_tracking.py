@@ -3,9 +3,9 @@
 import numpy as np
 from filterpy.kalman import KalmanFilter as FilterpyKalman
 
-from estimation_nodes.params.builders import build_kalman_settings
-from estimation_nodes.tools.recording import read_recording
-from estimation_nodes.tools.replay import estimator_values
+from estimation_nodes.params.estimator import build_kalman_settings
+from estimation_nodes.tools.recording.mcap import read_recording
+from estimation_nodes.tools.replay.estimator import estimator_values
 from tests.graph.graph_tools import settled
 from tests.graph.test_recording import decoded_by_topic, record_run
 

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from estimation_nodes.tools.graph_runtime import stop_process
-from estimation_nodes.tools.recording import read_recording
+from estimation_nodes.tools.demo.graph_runtime import stop_process
+from estimation_nodes.tools.recording.mcap import read_recording
 from tests.conftest import REPO, SCENARIOS
 from tests.graph import hosts
 from tests.graph.graph_tools import executable, node_command

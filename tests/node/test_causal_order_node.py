@@ -12,7 +12,7 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Int32, String
 
 from estimation_nodes.nodes.estimator import Estimator
-from estimation_nodes.tools.replay import align
+from estimation_nodes.tools.replay.estimator import align
 from tests.conftest import spin_until
 from tests.node.test_estimator_node import OUTPUTS
 

@@ -6,8 +6,10 @@ from geometry_msgs.msg import PoseWithCovariance
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Float64MultiArray, Int32
 
-from estimation_nodes.core import GaussianState, kalman, simulation
-from estimation_nodes.core.filter_state import KalmanFilter
+from estimation_nodes.core import GaussianState
+from estimation_nodes.core.kalman import linear as kalman
+from estimation_nodes.core.sim import draws as simulation
+from estimation_nodes.core.kalman.filter import KalmanFilter
 from estimation_nodes.nodes.estimator import Estimator
 from estimation_nodes.nodes.linear_system import LinearSystem
 from estimation_nodes.nodes.messages import (
@@ -18,7 +20,7 @@ from estimation_nodes.nodes.messages import (
 )
 from estimation_nodes.nodes.motion_commander import MotionCommander
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
-from estimation_nodes.params.builders import build_kalman_settings
+from estimation_nodes.params.estimator import build_kalman_settings
 from tests.conftest import spin_until
 from tests.unit.test_matrix_settings import TRACKING, values
 

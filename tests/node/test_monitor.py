@@ -6,8 +6,8 @@ from std_msgs.msg import Float64MultiArray, Int64
 
 from estimation_nodes.nodes.qos import latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.tools.monitor import RunMonitor
-from estimation_nodes.tools.run_record import summarize
+from estimation_nodes.tools.demo.monitor import RunMonitor
+from estimation_nodes.tools.recording.run_record import summarize
 from tests.conftest import spin_until
 
 

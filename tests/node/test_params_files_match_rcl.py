@@ -3,7 +3,7 @@
 import pytest
 from rclpy.node import Node
 
-from estimation_nodes.params.files import read_node_parameters
+from estimation_nodes.params.param_files import read_node_parameters
 from tests.unit.test_params_files import FILE
 
 #: Parameters every rclpy node declares itself.

@@ -5,7 +5,7 @@ import sys
 import pytest
 from hypothesis import HealthCheck, settings
 
-from estimation_nodes.core import histogram
+from estimation_nodes.core.tiles import histogram
 
 # The path fixture below is function-scoped on purpose: it holds for every
 # example hypothesis draws within the test, so its health check does not apply.

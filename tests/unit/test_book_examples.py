@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from estimation_nodes.core import HistogramModel, LinearGaussianModel, histogram, kalman
+from estimation_nodes.core import HistogramModel, LinearGaussianModel
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.kalman import linear as kalman
 
 TOL = 1e-6
 

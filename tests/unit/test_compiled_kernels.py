@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from estimation_nodes.core import MotionKernel, compiled, histogram
+from estimation_nodes.core import MotionKernel
+from estimation_nodes.core.tiles import compiled
+from estimation_nodes.core.tiles import histogram
 
 
 def random_kernel(rng, width):

@@ -5,7 +5,7 @@ import pytest
 
 from estimation_nodes.core import (GaussianState, HistogramModel, LinearGaussianModel,
                                    MotionKernel, ScalarKalmanModel, SensorModel)
-from estimation_nodes.core.models import BOOK_CLASSES, BOOK_KERNEL, BOOK_SENSOR_MODEL, \
+from estimation_nodes.core.validation import BOOK_CLASSES, BOOK_KERNEL, BOOK_SENSOR_MODEL, \
     BOOK_WORLD, check_belief
 
 
@@ -117,7 +117,7 @@ def test_models_are_immutable():
 
 
 def test_world_file_replaces_world(tmp_path):
-    from estimation_nodes.params.builders import build_histogram_model
+    from estimation_nodes.params.estimator import build_histogram_model
     from estimation_nodes.params.specs import ESTIMATOR_SPECS, spec_defaults
 
     path = tmp_path / "world.txt"
@@ -136,7 +136,7 @@ def test_world_file_replaces_world(tmp_path):
     (b"\xff\xfe", "cannot read"),
 ])
 def test_world_file_errors(tmp_path, content, message):
-    from estimation_nodes.params.builders import build_histogram_model
+    from estimation_nodes.params.estimator import build_histogram_model
     from estimation_nodes.params.specs import ESTIMATOR_SPECS, spec_defaults
 
     path = tmp_path / "world.txt"

@@ -5,7 +5,9 @@ import pytest
 from filterpy import discrete_bayes
 from filterpy.kalman import KalmanFilter
 
-from estimation_nodes.core import LinearGaussianModel, MotionKernel, histogram, kalman
+from estimation_nodes.core import LinearGaussianModel, MotionKernel
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.kalman import linear as kalman
 
 
 @pytest.mark.parametrize("seed", range(20))

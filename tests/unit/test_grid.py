@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from estimation_nodes.core import grid
+from estimation_nodes.core.grid import steps as grid
 
 RNG = np.random.default_rng(4)
 

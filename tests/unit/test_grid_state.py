@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from estimation_nodes.core import grid
-from estimation_nodes.core.grid_state import GridLocalization
+from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid.localization import GridLocalization
 from tests.unit.test_grid import small_model
 
 SECOND = 10**9

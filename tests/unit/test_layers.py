@@ -28,7 +28,7 @@ def imported_modules(path: Path) -> list[str]:
 
 
 def modules_of(layer: str) -> list[Path]:
-    return sorted((PACKAGE / layer).glob("*.py"))
+    return sorted((PACKAGE / layer).rglob("*.py"))
 
 
 def test_every_module_belongs_to_a_layer():
@@ -39,7 +39,7 @@ def test_every_module_belongs_to_a_layer():
 @pytest.mark.parametrize("layer", LAYERS)
 def test_a_layer_imports_only_itself_and_the_layers_below(layer):
     above = LAYERS[LAYERS.index(layer) + 1:]
-    wrong = [f"{path.name} imports {name}"
+    wrong = [f"{path.relative_to(PACKAGE)} imports {name}"
              for path in modules_of(layer) for name in imported_modules(path)
              if any(name.startswith(f"estimation_nodes.{upper}") for upper in above)]
     assert not wrong, f"{layer}/ points up: {wrong}"
@@ -47,7 +47,7 @@ def test_a_layer_imports_only_itself_and_the_layers_below(layer):
 
 @pytest.mark.parametrize("layer", ["core", "params"])
 def test_core_and_params_never_import_ros(layer):
-    wrong = [f"{path.name} imports {name}"
+    wrong = [f"{path.relative_to(PACKAGE)} imports {name}"
              for path in modules_of(layer) for name in imported_modules(path)
              if name.split(".")[0] in ROS]
     assert not wrong, f"{layer}/ imports ROS: {wrong}"
@@ -57,6 +57,6 @@ def test_the_core_needs_only_numpy_and_numba():
     import sys
 
     allowed = {"numpy", "numba", "estimation_nodes", "__future__"} | set(sys.stdlib_module_names)
-    wrong = [f"{path.name} imports {name}" for path in modules_of("core")
+    wrong = [f"{path.relative_to(PACKAGE)} imports {name}" for path in modules_of("core")
              for name in imported_modules(path) if name.split(".")[0] not in allowed]
     assert not wrong, f"core/ needs more than numpy: {wrong}"

@@ -20,14 +20,14 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from estimation_nodes.params import topics
-from estimation_nodes.tools.live_view import (
+from estimation_nodes.tools.live_view.server import (
     BACKLOG,
     LiveView,
     LiveViewError,
     parse_address,
     websocket_url,
 )
-from estimation_nodes.tools.recording import schema_text
+from estimation_nodes.tools.recording.mcap import schema_text
 from tests.foxglove_client import FoxgloveClient
 
 REPO = Path(__file__).resolve().parents[2]
@@ -70,7 +70,8 @@ def test_a_port_in_use_is_one_clear_error():
 
 
 def test_the_demo_does_not_import_foxglove_unless_asked():
-    code = ("import sys, estimation_nodes.tools.demo, estimation_nodes.tools.live_view; "
+    code = ("import sys, estimation_nodes.tools.demo.cli, "
+            "estimation_nodes.tools.live_view.server; "
             "assert 'foxglove' not in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=60)
 

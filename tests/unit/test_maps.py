@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from estimation_nodes.params import maps
+from estimation_nodes.params import map_files as maps
 from tests.conftest import REPO
 
 MAPS = REPO / "maps"

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from estimation_nodes.core import simulation
-from estimation_nodes.core.models import LinearGaussianModel
-from estimation_nodes.params.builders import (
+from estimation_nodes.core.sim import draws as simulation
+from estimation_nodes.core.validation import LinearGaussianModel
+from estimation_nodes.params.estimator import (
     build_commander_settings,
     build_kalman_settings,
     build_linear_system_settings,

@@ -8,8 +8,8 @@ import textwrap
 
 import pytest
 
-from estimation_nodes.params.files import node_parameters, read_node_parameters
-from estimation_nodes.tools.replay import estimator_values
+from estimation_nodes.params.param_files import node_parameters, read_node_parameters
+from estimation_nodes.tools.replay.estimator import estimator_values
 
 FILE = textwrap.dedent("""
     /**:

@@ -4,9 +4,10 @@ import struct
 
 import numpy as np
 
-from estimation_nodes.core import HistogramModel, histogram
-from estimation_nodes.tools.plot import DPI, FIGURE_INCHES, render
-from estimation_nodes.tools.run_record import RunRecord
+from estimation_nodes.core import HistogramModel
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.tools.plot.estimator import DPI, FIGURE_INCHES, render
+from estimation_nodes.tools.recording.run_record import RunRecord
 
 
 def png_size(path):
@@ -48,7 +49,7 @@ def test_render_copes_with_a_run_without_beliefs_or_estimates(tmp_path):
 
 
 def test_long_runs_show_at_most_twelve_evenly_spread_steps():
-    from estimation_nodes.tools.plot import _chosen_steps
+    from estimation_nodes.tools.plot.estimator import _chosen_steps
 
     assert _chosen_steps(5) == [0, 1, 2, 3, 4]
     steps = _chosen_steps(40)

@@ -9,7 +9,7 @@ summarized as 4 of 40 steps right).
 import numpy as np
 
 from estimation_nodes.params import topics
-from estimation_nodes.tools.run_record import RunRecord, summarize
+from estimation_nodes.tools.recording.run_record import RunRecord, summarize
 
 
 def one_hot(cell: int, size: int = 5) -> np.ndarray:

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from estimation_nodes.core.models import FloatArray
+from estimation_nodes.core.validation import FloatArray
 
 _jit = njit(nogil=True, cache=True)
 

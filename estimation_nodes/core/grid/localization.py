@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation_nodes.core import grid
-from estimation_nodes.core.models import FloatArray
+from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.validation import FloatArray
 
 Pose = tuple[float, float, float]
 #: Odometry poses kept to find the one of a scan's time (at 50 Hz, 4 s).

@@ -31,7 +31,7 @@ from types import ModuleType
 
 import numpy as np
 
-from estimation_nodes.core.models import FloatArray
+from estimation_nodes.core.validation import FloatArray
 
 TWO_PI = 2.0 * math.pi
 #: Beliefs of at least this many states take the compiled kernels (core/compiled_grid.py)
@@ -168,7 +168,7 @@ def odometry_delta(previous: tuple[float, float, float],
 def _compiled_kernels() -> ModuleType | None:
     """core/compiled_grid.py, compiled (or loaded from numba's cache); None without numba."""
     try:
-        from estimation_nodes.core import compiled_grid
+        from estimation_nodes.core.grid import compiled as compiled_grid
     except ImportError:
         return None
     compiled_grid.warm_up()

@@ -14,8 +14,9 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
-from estimation_nodes.core import histogram, kalman
-from estimation_nodes.core.models import (
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.kalman import linear as kalman
+from estimation_nodes.core.validation import (
     FloatArray,
     GaussianState,
     HistogramModel,

@@ -16,7 +16,7 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
-from estimation_nodes.core.models import FloatArray, LinearGaussianModel
+from estimation_nodes.core.validation import FloatArray, LinearGaussianModel
 
 
 class ScalarEstimate(NamedTuple):

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from estimation_nodes.core.models import FloatArray, LinearGaussianModel, MotionKernel
+from estimation_nodes.core.validation import FloatArray, LinearGaussianModel, MotionKernel
 
 
 def sample_offset(kernel: MotionKernel, rng: np.random.Generator) -> int:

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation_nodes.core.grid import OdometryNoise
-from estimation_nodes.core.models import FloatArray
+from estimation_nodes.core.grid.steps import OdometryNoise
+from estimation_nodes.core.validation import FloatArray
 
 Pose = tuple[float, float, float]
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from estimation_nodes.core.models import FloatArray
+from estimation_nodes.core.validation import FloatArray
 
 # nogil: a node's other threads keep running during a step over a million cells.
 # cache: the machine code is kept beside the module, so only the first run compiles.

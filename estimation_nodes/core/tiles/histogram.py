@@ -22,7 +22,7 @@ from types import ModuleType
 
 import numpy as np
 
-from estimation_nodes.core.models import FloatArray, MotionKernel
+from estimation_nodes.core.validation import FloatArray, MotionKernel
 
 #: Worlds of at least this many cells take the compiled kernels of
 #: ``compiled`` (numba) when numba imports: from here on the passes over
@@ -53,7 +53,7 @@ def one_hot(size: int, cell: int) -> FloatArray:
 @functools.cache
 def _compiled_module() -> ModuleType | None:
     try:
-        from estimation_nodes.core import compiled
+        from estimation_nodes.core.tiles import compiled
     except ImportError:   # numba missing or not matching this numpy: numpy path
         return None
     compiled.warm_up()

@@ -21,17 +21,17 @@ from pathlib import Path
 import yaml
 
 from estimation_nodes.params import topics
-from estimation_nodes.params.files import check_params_file
-from estimation_nodes.tools.graph_runtime import (
+from estimation_nodes.params.param_files import check_params_file
+from estimation_nodes.tools.demo.graph_runtime import (
     run_until_done,
     spin_until,
     start_node,
     stop_children,
 )
 from estimation_nodes.tools.installed import share_dirs
-from estimation_nodes.tools.live_view import LiveViewError, parse_address
-from estimation_nodes.tools.recording import RecordingError
-from estimation_nodes.tools.run_record import RunRecord, summarize
+from estimation_nodes.tools.live_view.server import LiveViewError, parse_address
+from estimation_nodes.tools.recording.mcap import RecordingError
+from estimation_nodes.tools.recording.run_record import RunRecord, summarize
 
 NODE_MODULES = {
     "estimator": "estimation_nodes.nodes.estimator",
@@ -55,7 +55,7 @@ class DemoError(Exception):
 def scenario_dirs() -> list[Path]:
     """Where installed and source-tree scenario files live, most specific first."""
     dirs = [share / "estimation_nodes" / "msgs_config" for share in share_dirs()]
-    dirs.append(Path(__file__).resolve().parents[2] / "msgs_config")
+    dirs.append(Path(__file__).resolve().parents[3] / "msgs_config")
     return [d for d in dirs if d.is_dir()]
 
 
@@ -178,7 +178,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     if args.record:
         print(f"estimation_demo: recorded to {args.record}")
     if args.plot:
-        from estimation_nodes.tools.plot import render
+        from estimation_nodes.tools.plot.estimator import render
 
         print(f"estimation_demo: plot written to {render(record, args.plot)}")
     sys.exit(code)
@@ -201,7 +201,7 @@ def resolved(topic_types: dict[str, str]) -> dict[str, str]:
 
 def run_grid_scenario(params: Path, args: argparse.Namespace) -> int:
     """A grid localization run (tools/grid_demo.py); its exit code."""
-    from estimation_nodes.tools import grid_demo
+    from estimation_nodes.tools.demo import grid_run as grid_demo
 
     if args.in_process:
         print("estimation_demo: --in-process is not available for grid localization runs",
@@ -227,7 +227,7 @@ def run_grid_scenario(params: Path, args: argparse.Namespace) -> int:
     if args.record:
         print(f"estimation_demo: recorded to {args.record}")
     if args.plot and code == 0:
-        from estimation_nodes.tools.grid_plot import render_grid
+        from estimation_nodes.tools.plot.grid_localizer import render_grid
 
         print(f"estimation_demo: plot written to {render_grid(args.record, args.plot)}")
     return code
@@ -241,14 +241,14 @@ def make_sinks(params: Path, args: argparse.Namespace, recorded: dict[str, str] 
     sinks: list = []
     try:
         if args.foxglove:
-            from estimation_nodes.tools.live_view import LiveView
+            from estimation_nodes.tools.live_view.server import LiveView
 
             view = LiveView(*args.foxglove, served or resolved(topics.LIVE_TOPIC_TYPES))
             sinks.append(view)
             print(f"estimation_demo: Foxglove live view on {view.url} (in Foxglove: Open "
                   f"connection, Foxglove WebSocket)", flush=True)
         if args.record:
-            from estimation_nodes.tools.recording import McapRunWriter
+            from estimation_nodes.tools.recording.mcap import McapRunWriter
 
             metadata = {"parameters_yaml": params.read_text(encoding="utf-8"),
                         "parameters_file": str(params)}
@@ -267,7 +267,7 @@ def close_sinks(sinks: list) -> None:
 
 def make_monitor(args: argparse.Namespace, sinks: list):
     """The monitor node, feeding ``sinks``."""
-    from estimation_nodes.tools.monitor import RunMonitor
+    from estimation_nodes.tools.demo.monitor import RunMonitor
 
     # /diagnostics only when a live view shows it: the monitor has no other use for it.
     extra = {topics.DIAGNOSTICS: topics.LIVE_TOPIC_TYPES[topics.DIAGNOSTICS]} \

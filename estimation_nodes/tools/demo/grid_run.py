@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from estimation_nodes.params import topics
-from estimation_nodes.tools.graph_runtime import run_until_done, start_node, stop_children
+from estimation_nodes.tools.demo.graph_runtime import run_until_done, start_node, stop_children
 
 NODE_MODULES = {"grid_localizer": "estimation_nodes.nodes.grid_localizer",
                 "planar_robot": "estimation_nodes.nodes.planar_robot"}
@@ -82,7 +82,7 @@ class GridMonitor:
             self._raw_subscriptions()
 
     def _raw_subscriptions(self) -> None:
-        from estimation_nodes.tools.monitor import message_class, observer_qos
+        from estimation_nodes.tools.demo.monitor import message_class, observer_qos
 
         for topic, type_name in grid_topic_types().items():
             qos = 10 if topic in ("/scan", "/odom") else observer_qos(topic)

@@ -20,7 +20,7 @@ from rclpy.serialization import deserialize_message
 from estimation_nodes.nodes.messages import from_state_message
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.tools.run_record import RunRecord
+from estimation_nodes.tools.recording.run_record import RunRecord
 
 BARS = " ▁▂▃▄▅▆▇█"
 

@@ -19,7 +19,7 @@ import threading
 from typing import Any
 
 from estimation_nodes.params.specs import FOXGLOVE_HOST
-from estimation_nodes.tools.recording import schema_text
+from estimation_nodes.tools.recording.mcap import schema_text
 
 #: Messages queued per client before the oldest is dropped (foxglove-sdk's default is 1024).
 #: A client that stops reading costs this many messages of memory, never a blocked

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from estimation_nodes.params import topics
-from estimation_nodes.tools.run_record import OUTPUT_LISTS, RunRecord
+from estimation_nodes.tools.recording.run_record import OUTPUT_LISTS, RunRecord
 
 #: Pixel size of every picture: 16 x 12 inches at 100 dpi.
 FIGURE_INCHES = (16.0, 12.0)
@@ -175,13 +175,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("recording", type=Path, help="an MCAP file from estimation_demo --record")
     parser.add_argument("--output", "-o", type=Path, required=True, help="PNG file to write")
     args = parser.parse_args(argv)
-    from estimation_nodes.tools.recording import RecordingError, read_recording
+    from estimation_nodes.tools.recording.mcap import RecordingError, read_recording
 
     if args.recording.is_file():
-        from estimation_nodes.tools.grid_replay import is_grid_recording
+        from estimation_nodes.tools.replay.grid_localizer import is_grid_recording
 
         if is_grid_recording(args.recording):
-            from estimation_nodes.tools.grid_plot import render_grid
+            from estimation_nodes.tools.plot.grid_localizer import render_grid
 
             print(f"estimation_plot: wrote {render_grid(args.recording, args.output)}")
             return

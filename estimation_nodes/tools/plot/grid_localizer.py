@@ -16,7 +16,7 @@ import numpy as np
 
 from estimation_nodes.params import topics
 from estimation_nodes.nodes.grid_messages import planar_pose
-from estimation_nodes.tools.grid_replay import header_stamp_ns, recorded_messages
+from estimation_nodes.tools.replay.grid_localizer import header_stamp_ns, recorded_messages
 
 PANELS = 6
 #: Width of the picture, and the height of one for a square map (inches at DPI).

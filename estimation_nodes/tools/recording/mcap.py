@@ -18,7 +18,7 @@ import numpy as np
 
 from estimation_nodes.params import topics
 from estimation_nodes.tools.installed import share_dirs
-from estimation_nodes.tools.run_record import RunRecord
+from estimation_nodes.tools.recording.run_record import RunRecord
 
 METADATA_NAME = "estimation_nodes"
 _SEPARATOR = "=" * 80

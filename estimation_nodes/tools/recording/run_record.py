@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from estimation_nodes.core.models import FloatArray
+from estimation_nodes.core.validation import FloatArray
 from estimation_nodes.params import topics
 
 

@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation_nodes.core.filter_state import HistogramFilter, KalmanFilter
+from estimation_nodes.core.kalman.filter import HistogramFilter, KalmanFilter
 from estimation_nodes.params import topics
-from estimation_nodes.params.builders import build_estimator_settings
-from estimation_nodes.params.files import check_params_file, read_node_parameters
+from estimation_nodes.params.estimator import build_estimator_settings
+from estimation_nodes.params.param_files import check_params_file, read_node_parameters
 from estimation_nodes.params.specs import ESTIMATOR_SPECS, spec_defaults
 from estimation_nodes.params.wording import plural
-from estimation_nodes.tools.recording import Recording, RecordingError, read_recording
+from estimation_nodes.tools.recording.mcap import Recording, RecordingError, read_recording
 
 
 @dataclass
@@ -240,7 +240,7 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def _is_grid(path: Path) -> bool:
-    from estimation_nodes.tools.grid_replay import is_grid_recording
+    from estimation_nodes.tools.replay.grid_localizer import is_grid_recording
 
     try:
         return is_grid_recording(path)
@@ -250,7 +250,7 @@ def _is_grid(path: Path) -> bool:
 
 def _main_grid(args: argparse.Namespace) -> int:
     """The grid localizer's replay (tools/grid_replay.py); its exit code."""
-    from estimation_nodes.tools.grid_replay import replay_grid
+    from estimation_nodes.tools.replay.grid_localizer import replay_grid
 
     try:
         parameters_yaml = check_params_file(args.params_file).read_text(encoding="utf-8") \

@@ -1,0 +1,1 @@
+"""Grid (Markov) localization over (x, y, heading) on an occupancy map."""

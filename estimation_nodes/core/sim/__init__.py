@@ -1,0 +1,1 @@
+"""What the simulators draw: the tile world, the linear system, the planar robot."""

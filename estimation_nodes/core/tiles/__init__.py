@@ -1,0 +1,1 @@
+"""The book's histogram (discrete Bayes) filter over a cyclic world of tiles."""

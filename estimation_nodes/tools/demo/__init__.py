@@ -1,0 +1,1 @@
+"""estimation_demo: runs a scenario's graph, watches it, summarizes it."""

@@ -1,0 +1,1 @@
+"""estimation_plot: pictures of recorded runs."""

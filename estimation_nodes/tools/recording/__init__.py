@@ -1,0 +1,1 @@
+"""Runs as MCAP recordings: writing, reading, and the record of a run."""

@@ -1,0 +1,1 @@
+"""estimation_replay: a recorded run recomputed offline and compared with what was published."""
