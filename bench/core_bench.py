@@ -24,14 +24,10 @@ from filterpy.kalman import KalmanFilter
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from timing import compare, format_seconds, table  # noqa: E402
 
-from estimation_nodes.core import (  # noqa: E402
-    GaussianState,
-    LinearGaussianModel,
-    MotionKernel,
-    histogram,
-    kalman,
-)
+from estimation_nodes.core import histogram, kalman  # noqa: E402
 from estimation_nodes.core.kalman.filter import KalmanFilter as RunningKalman  # noqa: E402
+from estimation_nodes.core.kalman.models import GaussianState, LinearGaussianModel  # noqa: E402
+from estimation_nodes.core.tiles.models import MotionKernel  # noqa: E402
 from estimation_nodes.nodes.process_memory import keep_freed_memory  # noqa: E402
 
 

@@ -36,8 +36,8 @@ sys.path.insert(0, str(BENCH))
 sys.path.insert(1, str(BENCH.parent))
 from timing import table  # noqa: E402
 
-from estimation_nodes.core.grid import steps as grid# noqa: E402
-from estimation_nodes.params import map_files as maps# noqa: E402
+from estimation_nodes.core.grid import steps as grid  # noqa: E402
+from estimation_nodes.params import map_files as maps  # noqa: E402
 
 DELTA = (0.1, 0.25, 0.05)
 

@@ -33,10 +33,10 @@ sys.path.insert(0, str(BENCH))
 sys.path.insert(1, str(BENCH.parent))
 from timing import table  # noqa: E402
 
-from estimation_nodes.core.grid import steps as grid# noqa: E402
-from estimation_nodes.core.sim import planar# noqa: E402
+from estimation_nodes.core.grid import steps as grid  # noqa: E402
 from estimation_nodes.core.grid.localization import GridLocalization  # noqa: E402
-from estimation_nodes.params import map_files as maps# noqa: E402
+from estimation_nodes.core.sim import planar  # noqa: E402
+from estimation_nodes.params import map_files as maps  # noqa: E402
 
 RATE_HZ = 10.0
 BEAMS = 180

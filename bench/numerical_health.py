@@ -17,10 +17,11 @@ import time
 
 import numpy as np
 
-from estimation_nodes.core import HistogramModel, LinearGaussianModel
 from estimation_nodes.core.kalman import linear as kalman
+from estimation_nodes.core.kalman.models import LinearGaussianModel
 from estimation_nodes.core.sim import draws as simulation
 from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.models import HistogramModel
 
 
 def histogram_health(steps: int, seed: int = 1) -> dict:

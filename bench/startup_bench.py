@@ -26,8 +26,9 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
 from timing import table  # noqa: E402
+
+from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
 
 PROFILE = Path(__file__).resolve().parent / "fastdds_discovery.xml"
 

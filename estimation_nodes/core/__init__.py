@@ -8,14 +8,12 @@ validation: the checks every model and step shares.
 Never imports rclpy: nodes, replay and tests share it (a test checks).
 """
 
-from estimation_nodes.core.validation import (
+from estimation_nodes.core.kalman.models import (
     GaussianState,
-    HistogramModel,
     LinearGaussianModel,
-    MotionKernel,
     ScalarKalmanModel,
-    SensorModel,
 )
+from estimation_nodes.core.tiles.models import HistogramModel, MotionKernel, SensorModel
 
 __all__ = [
     "GaussianState",

@@ -26,27 +26,24 @@ from typing import Any
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseWithCovariance, PoseWithCovarianceStamped
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import (
     PublisherEventCallbacks,
     QoSMessageLostInfo,
     QoSRequestedIncompatibleQoSInfo,
     SubscriptionEventCallbacks,
 )
-from rclpy.qos import qos_policy_name_from_kind
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rcl_interfaces.msg import SetParametersResult
+from rclpy.qos import qos_policy_name_from_kind
 from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
 
-from estimation_nodes.core.tiles import histogram
-from estimation_nodes.core.kalman import linear as kalman
 from estimation_nodes.core.causal_order import CausalOrder, Submission
-from estimation_nodes.core.kalman.filter import (
-    HistogramFilter,
-    KalmanFilter,
-    NonFiniteResultError,
-)
+from estimation_nodes.core.kalman import linear as kalman
+from estimation_nodes.core.kalman.filter import KalmanFilter, NonFiniteResultError
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.filter import HistogramFilter
 from estimation_nodes.nodes import wire
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
@@ -56,12 +53,12 @@ from estimation_nodes.nodes.parameters import (
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.process_memory import keep_freed_memory
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
-from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.nodes.rclpy_internals import (
     INCOMPATIBLE_QOS,
     MESSAGE_LOST,
     SubscriptionEvents,
 )
+from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
 from estimation_nodes.params.estimator import (
     HISTOGRAM_KEYS,
@@ -71,8 +68,8 @@ from estimation_nodes.params.estimator import (
     reorder_max_events,
     update_estimator_settings,
 )
-from estimation_nodes.params.wording import plural
 from estimation_nodes.params.specs import ESTIMATOR_SPECS
+from estimation_nodes.params.wording import plural
 
 #: Order of events stamped at the same instant: a move before the readings after it.
 MOVE, READING = 0, 1

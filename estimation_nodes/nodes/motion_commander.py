@@ -20,10 +20,10 @@ import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, Int32
 
+from estimation_nodes.nodes.messages import to_multiarray
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
 )
-from estimation_nodes.nodes.messages import to_multiarray
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS
 from estimation_nodes.nodes.subscribers import missing_subscribers

@@ -29,10 +29,10 @@ from __future__ import annotations
 
 from typing import Any, Callable
 
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.callback_groups import CallbackGroup
 from rclpy.event_handler import QoSSubscriptionEventType
 from rclpy.executors import await_or_execute
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.subscription import Subscription
 from rclpy.waitable import NumberOfEntities, Waitable

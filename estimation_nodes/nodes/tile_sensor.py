@@ -17,15 +17,16 @@ from rclpy.node import Node
 from std_msgs.msg import Float64, Int32, Int64, String
 
 from estimation_nodes.core.sim import draws as simulation
+from estimation_nodes.nodes.held_publisher import HeldPublisher, subscribe_when_ready
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
 )
-from estimation_nodes.nodes.held_publisher import HeldPublisher, subscribe_when_ready
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
 from estimation_nodes.params.estimator import build_sensor_settings
 from estimation_nodes.params.specs import SENSOR_SPECS
+
 
 class TileSensor(Node):
     """Ground truth and simulated sensing for one robot on the cyclic world."""

@@ -14,16 +14,16 @@ from typing import Any
 
 import numpy as np
 
+from estimation_nodes.core.kalman.models import (
+    GaussianState,
+    LinearGaussianModel,
+    ScalarKalmanModel,
+)
 from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.models import HistogramModel, MotionKernel, check_belief
 from estimation_nodes.core.validation import (
     FloatArray,
-    GaussianState,
-    HistogramModel,
-    LinearGaussianModel,
-    MotionKernel,
-    ScalarKalmanModel,
     as_finite_array,
-    check_belief,
     check_covariance,
     check_finite,
     check_probability_vector,

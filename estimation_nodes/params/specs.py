@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Any
 
-from estimation_nodes.core.validation import (
+from estimation_nodes.core.tiles.models import (
     BOOK_CLASSES,
     BOOK_KERNEL,
     BOOK_SENSOR_MODEL,

@@ -14,8 +14,8 @@ import yaml
 from geometry_msgs.msg import PoseWithCovariance
 from std_msgs.msg import Float64MultiArray, Int64, String
 
-from estimation_nodes.core import HistogramModel
 from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.models import HistogramModel
 from estimation_nodes.nodes.qos import INPUT_QOS
 from tests.conftest import SCENARIOS, spin_until
 from tests.graph.graph_tools import (

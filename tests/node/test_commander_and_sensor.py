@@ -5,8 +5,8 @@ import pytest
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Int32, Int64, String
 
-from estimation_nodes.core import HistogramModel
 from estimation_nodes.core.sim import draws as simulation
+from estimation_nodes.core.tiles.models import HistogramModel
 from estimation_nodes.nodes.motion_commander import MotionCommander
 from estimation_nodes.nodes.parameters import ConfigurationError
 from estimation_nodes.nodes.qos import INPUT_QOS

@@ -10,9 +10,9 @@ from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
 
-from estimation_nodes.core import HistogramModel
-from estimation_nodes.core.tiles import histogram
 from estimation_nodes.core.kalman import linear as kalman
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.models import HistogramModel
 from estimation_nodes.nodes.estimator import Estimator
 from estimation_nodes.nodes.parameters import ConfigurationError, warn_unknown_parameters
 from estimation_nodes.nodes.qos import INPUT_QOS

@@ -6,10 +6,10 @@ from geometry_msgs.msg import PoseWithCovariance
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Float64MultiArray, Int32
 
-from estimation_nodes.core import GaussianState
 from estimation_nodes.core.kalman import linear as kalman
-from estimation_nodes.core.sim import draws as simulation
 from estimation_nodes.core.kalman.filter import KalmanFilter
+from estimation_nodes.core.kalman.models import GaussianState
+from estimation_nodes.core.sim import draws as simulation
 from estimation_nodes.nodes.estimator import Estimator
 from estimation_nodes.nodes.linear_system import LinearSystem
 from estimation_nodes.nodes.messages import (

@@ -21,7 +21,6 @@ from estimation_nodes.nodes.messages import (
     to_state_message,
 )
 
-
 CACHED = (wire._multiarray_prefix, wire._state_prefix, wire._frame_id_and_padding)
 
 

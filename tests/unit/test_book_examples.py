@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from estimation_nodes.core import HistogramModel, LinearGaussianModel
-from estimation_nodes.core.tiles import histogram
 from estimation_nodes.core.kalman import linear as kalman
+from estimation_nodes.core.kalman.models import LinearGaussianModel
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.models import HistogramModel
 
 TOL = 1e-6
 

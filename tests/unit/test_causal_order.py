@@ -5,10 +5,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimation_nodes.core import HistogramModel
-from estimation_nodes.core.tiles import histogram
 from estimation_nodes.core.causal_order import CausalOrder
-from estimation_nodes.core.kalman.filter import HistogramFilter
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.filter import HistogramFilter
+from estimation_nodes.core.tiles.models import HistogramModel
 
 SECOND = 10**9
 

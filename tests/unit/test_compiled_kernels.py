@@ -3,9 +3,8 @@
 import numpy as np
 import pytest
 
-from estimation_nodes.core import MotionKernel
-from estimation_nodes.core.tiles import compiled
-from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles import compiled, histogram
+from estimation_nodes.core.tiles.models import MotionKernel
 
 
 def random_kernel(rng, width):

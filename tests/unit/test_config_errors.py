@@ -3,10 +3,21 @@
 import numpy as np
 import pytest
 
-from estimation_nodes.core import (GaussianState, HistogramModel, LinearGaussianModel,
-                                   MotionKernel, ScalarKalmanModel, SensorModel)
-from estimation_nodes.core.validation import BOOK_CLASSES, BOOK_KERNEL, BOOK_SENSOR_MODEL, \
-    BOOK_WORLD, check_belief
+from estimation_nodes.core.kalman.models import (
+    GaussianState,
+    LinearGaussianModel,
+    ScalarKalmanModel,
+)
+from estimation_nodes.core.tiles.models import (
+    BOOK_CLASSES,
+    BOOK_KERNEL,
+    BOOK_SENSOR_MODEL,
+    BOOK_WORLD,
+    HistogramModel,
+    MotionKernel,
+    SensorModel,
+    check_belief,
+)
 
 
 def histogram_model(**changes):

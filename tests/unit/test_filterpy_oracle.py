@@ -5,9 +5,10 @@ import pytest
 from filterpy import discrete_bayes
 from filterpy.kalman import KalmanFilter
 
-from estimation_nodes.core import LinearGaussianModel, MotionKernel
-from estimation_nodes.core.tiles import histogram
 from estimation_nodes.core.kalman import linear as kalman
+from estimation_nodes.core.kalman.models import LinearGaussianModel
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.models import MotionKernel
 
 
 @pytest.mark.parametrize("seed", range(20))

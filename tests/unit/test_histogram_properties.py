@@ -6,8 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from estimation_nodes.core import HistogramModel, MotionKernel
 from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.models import HistogramModel, MotionKernel
 
 # Every histogram test here runs on numpy's path and on the compiled one.
 pytestmark = pytest.mark.usefixtures("histogram_path")

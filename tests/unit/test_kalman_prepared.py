@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from estimation_nodes.core import GaussianState, LinearGaussianModel
 from estimation_nodes.core.kalman import linear as kalman
 from estimation_nodes.core.kalman.filter import KalmanFilter, NonFiniteResultError
+from estimation_nodes.core.kalman.models import GaussianState, LinearGaussianModel
 
 
 def random_model(rng, n, m, p, q):

@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from estimation_nodes.core import LinearGaussianModel
 from estimation_nodes.core.kalman import linear as kalman
+from estimation_nodes.core.kalman.models import LinearGaussianModel
 
 
 def spd(rng, size):

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from estimation_nodes.core.kalman.models import LinearGaussianModel
 from estimation_nodes.core.sim import draws as simulation
-from estimation_nodes.core.validation import LinearGaussianModel
 from estimation_nodes.params.estimator import (
     build_commander_settings,
     build_kalman_settings,

@@ -4,8 +4,8 @@ import struct
 
 import numpy as np
 
-from estimation_nodes.core import HistogramModel
 from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.models import HistogramModel
 from estimation_nodes.tools.plot.estimator import DPI, FIGURE_INCHES, render
 from estimation_nodes.tools.recording.run_record import RunRecord
 

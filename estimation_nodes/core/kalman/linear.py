@@ -16,7 +16,8 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
-from estimation_nodes.core.validation import FloatArray, LinearGaussianModel
+from estimation_nodes.core.kalman.models import LinearGaussianModel
+from estimation_nodes.core.validation import FloatArray
 
 
 class ScalarEstimate(NamedTuple):

@@ -9,7 +9,9 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from estimation_nodes.core.validation import FloatArray, LinearGaussianModel, MotionKernel
+from estimation_nodes.core.kalman.models import LinearGaussianModel
+from estimation_nodes.core.tiles.models import MotionKernel
+from estimation_nodes.core.validation import FloatArray
 
 
 def sample_offset(kernel: MotionKernel, rng: np.random.Generator) -> int:

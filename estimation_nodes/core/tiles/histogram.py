@@ -22,7 +22,8 @@ from types import ModuleType
 
 import numpy as np
 
-from estimation_nodes.core.validation import FloatArray, MotionKernel
+from estimation_nodes.core.tiles.models import MotionKernel
+from estimation_nodes.core.validation import FloatArray
 
 #: Worlds of at least this many cells take the compiled kernels of
 #: ``compiled`` (numba) when numba imports: from here on the passes over

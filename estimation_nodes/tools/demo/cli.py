@@ -329,9 +329,9 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     from estimation_nodes.nodes.estimator import Estimator
     from estimation_nodes.nodes.linear_system import LinearSystem
     from estimation_nodes.nodes.motion_commander import MotionCommander
-    from estimation_nodes.nodes.tile_sensor import TileSensor
     from estimation_nodes.nodes.parameters import ConfigurationError
     from estimation_nodes.nodes.process import ignore_further_interrupts
+    from estimation_nodes.nodes.tile_sensor import TileSensor
 
     ros_args = ["--ros-args", "--params-file", str(params),
                 *commander_overrides(args.settle, exit_when_done=False)]

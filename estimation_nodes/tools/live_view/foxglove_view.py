@@ -25,8 +25,8 @@ from estimation_nodes.nodes.parameters import ConfigurationError, declare_and_bu
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.params import topics
 from estimation_nodes.params.specs import FOXGLOVE_VIEW_SPECS
-from estimation_nodes.tools.live_view.server import LiveView, LiveViewError
 from estimation_nodes.tools.demo.monitor import message_class, observer_qos
+from estimation_nodes.tools.live_view.server import LiveView, LiveViewError
 
 
 class FoxgloveView(Node):

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation_nodes.params import topics
 from estimation_nodes.nodes.grid_messages import planar_pose
+from estimation_nodes.params import topics
 from estimation_nodes.tools.replay.grid_localizer import header_stamp_ns, recorded_messages
 
 PANELS = 6

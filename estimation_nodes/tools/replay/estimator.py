@@ -27,7 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation_nodes.core.kalman.filter import HistogramFilter, KalmanFilter
+from estimation_nodes.core.kalman.filter import KalmanFilter
+from estimation_nodes.core.tiles.filter import HistogramFilter
 from estimation_nodes.params import topics
 from estimation_nodes.params.estimator import build_estimator_settings
 from estimation_nodes.params.param_files import check_params_file, read_node_parameters
