@@ -39,9 +39,9 @@ from rclpy.qos import qos_policy_name_from_kind
 from std_msgs.msg import Float64, Float64MultiArray, Int32, String
 from std_srvs.srv import Trigger
 
+from estimation_nodes.core import errors
 from estimation_nodes.core.causal_order import CausalOrder, Submission
-from estimation_nodes.core.kalman import linear as kalman
-from estimation_nodes.core.kalman.filter import KalmanFilter, NonFiniteResultError
+from estimation_nodes.core.kalman.filter import KalmanFilter
 from estimation_nodes.core.tiles import histogram
 from estimation_nodes.core.tiles.filter import HistogramFilter
 from estimation_nodes.nodes import wire
@@ -314,7 +314,7 @@ class Estimator(Node):
     def _on_tile_observation(self, msg: String, first_time: bool) -> bool:
         try:
             self._histogram.correct(msg.data)
-        except histogram.ZeroEvidenceError as error:
+        except errors.ZeroEvidenceError as error:
             self._reject("zero_evidence", f"tile_observation {msg.data!r} dropped: {error}",
                          counted=first_time)
             return False
@@ -338,11 +338,11 @@ class Estimator(Node):
         the input dropped (and counted, the first time) with the filter untouched."""
         try:
             (self._kalman.predict if predicted else self._kalman.correct)(value)
-        except NonFiniteResultError as error:
+        except errors.NonFiniteResultError as error:
             self._reject("numerical_overflow", f"{topic} {value!r} dropped: {error}",
                          counted=first_time)
             return False
-        except kalman.InputSizeError as error:
+        except errors.InputSizeError as error:
             self._reject(f"wrong_size.{topic}", f"{topic} dropped: {error}", counted=first_time)
             return False
         except ValueError as error:   # NaN or inf

@@ -29,6 +29,7 @@ from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
+from estimation_nodes.core import errors
 from estimation_nodes.core.grid import steps as grid
 from estimation_nodes.core.grid.localization import GridLocalization
 from estimation_nodes.nodes.grid_messages import (
@@ -174,7 +175,7 @@ class GridLocalizer(Node):
         started = time.perf_counter()
         try:
             self.localization.update(ranges, angles, stamp)
-        except grid.ZeroEvidenceError as error:
+        except errors.ZeroEvidenceError as error:
             self._reject("zero_evidence", f"scan dropped: {error}")
             return
         self.last_update_s = time.perf_counter() - started

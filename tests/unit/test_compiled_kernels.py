@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from estimation_nodes.core import errors
 from estimation_nodes.core.tiles import compiled, histogram
 from estimation_nodes.core.tiles.models import MotionKernel
 
@@ -61,7 +62,7 @@ def test_a_large_world_without_numba_takes_numpys_path(monkeypatch):
 def test_in_place_correction_of_a_large_world_writes_only_on_success():
     size = histogram.COMPILED_MIN_CELLS
     belief = histogram.uniform(size)
-    with pytest.raises(histogram.ZeroEvidenceError):
+    with pytest.raises(errors.ZeroEvidenceError):
         histogram.correct(belief, np.zeros(size), out=belief)
     np.testing.assert_array_equal(belief, histogram.uniform(size))
     posterior, _ = histogram.correct(belief, np.linspace(0.1, 0.9, size), out=belief)

@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from estimation_nodes.core import errors
 from estimation_nodes.core.grid import steps as grid
 
 RNG = np.random.default_rng(4)
@@ -127,7 +128,7 @@ def test_correction_is_bayes_rule_and_returns_the_log_evidence():
 def test_a_scan_nothing_explains_raises_and_changes_nothing():
     model = small_model()
     belief = np.zeros(model.shape)
-    with pytest.raises(grid.ZeroEvidenceError):
+    with pytest.raises(errors.ZeroEvidenceError):
         grid.correct(belief, np.zeros(model.shape))
 
 

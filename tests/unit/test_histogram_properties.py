@@ -6,6 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
+from estimation_nodes.core import errors
 from estimation_nodes.core.tiles import histogram
 from estimation_nodes.core.tiles.models import HistogramModel, MotionKernel
 
@@ -94,7 +95,7 @@ def test_steps_do_not_modify_their_inputs():
 def test_zero_evidence_is_an_error_not_nan():
     belief = histogram.one_hot(5, 0)
     likelihood = np.array([0.0, 1.0, 1.0, 1.0, 1.0])
-    with pytest.raises(histogram.ZeroEvidenceError, match="evidence 0.0"):
+    with pytest.raises(errors.ZeroEvidenceError, match="evidence 0.0"):
         histogram.correct(belief, likelihood)
 
 
@@ -133,6 +134,6 @@ def test_correct_into_out_matches_and_is_untouched_on_zero_evidence():
     np.testing.assert_array_equal(posterior, expected)
     assert evidence == expected_evidence
     hot = histogram.one_hot(50, 3)
-    with pytest.raises(histogram.ZeroEvidenceError):
+    with pytest.raises(errors.ZeroEvidenceError):
         histogram.correct(hot, np.where(np.arange(50) == 3, 0.0, 1.0), out=hot)
     np.testing.assert_array_equal(hot, histogram.one_hot(50, 3))

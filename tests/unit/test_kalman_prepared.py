@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
+from estimation_nodes.core import errors
 from estimation_nodes.core.kalman import linear as kalman
-from estimation_nodes.core.kalman.filter import KalmanFilter, NonFiniteResultError
+from estimation_nodes.core.kalman.filter import KalmanFilter
 from estimation_nodes.core.kalman.models import GaussianState, LinearGaussianModel
 
 
@@ -86,7 +87,7 @@ def test_a_preparation_that_cannot_be_finite_leaves_the_error_to_the_step():
     kalman_filter = KalmanFilter(GaussianState(np.array([0.0]), np.array([[1e200]])), model)
     kalman_filter.prepare()   # A P A' overflows: nothing raised here
     before = kalman_filter.snapshot()
-    with pytest.raises(NonFiniteResultError):
+    with pytest.raises(errors.NonFiniteResultError):
         kalman_filter.predict([0.0])
     assert kalman_filter.snapshot() == before
     kalman_filter.correct([1.0])   # the correction does not overflow and still works

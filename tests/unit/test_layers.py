@@ -60,3 +60,23 @@ def test_the_core_needs_only_numpy_and_numba():
     wrong = [f"{path.relative_to(PACKAGE)} imports {name}" for path in modules_of("core")
              for name in imported_modules(path) if name.split(".")[0] not in allowed]
     assert not wrong, f"core/ needs more than numpy: {wrong}"
+
+
+def test_the_core_defines_its_exceptions_in_one_place():
+    defined = [f"{path.relative_to(PACKAGE)}: {node.name}"
+               for path in modules_of("core") if path.name != "errors.py"
+               for node in ast.walk(ast.parse(path.read_text(encoding="utf-8")))
+               if isinstance(node, ast.ClassDef) and node.name.endswith("Error")]
+    assert not defined, f"exceptions outside core/errors.py: {defined}"
+
+
+def test_every_core_exception_is_an_estimation_error():
+    import inspect
+
+    from estimation_nodes.core import errors
+
+    classes = [c for _, c in inspect.getmembers(errors, inspect.isclass)
+               if c.__module__ == errors.__name__]
+    assert len(classes) > 1
+    assert all(issubclass(c, errors.EstimationError) for c in classes)
+    assert issubclass(errors.EstimationError, ValueError)

@@ -31,16 +31,13 @@ from types import ModuleType
 
 import numpy as np
 
+from estimation_nodes.core.errors import ZeroEvidenceError
 from estimation_nodes.core.validation import FloatArray
 
 TWO_PI = 2.0 * math.pi
 #: Beliefs of at least this many states take the compiled kernels (core/compiled_grid.py)
 #: when numba imports; smaller ones never import it.
 COMPILED_MIN_STATES = 100_000
-
-
-class ZeroEvidenceError(ValueError):
-    """A scan every state rules out (or a belief with no mass left on free cells)."""
 
 
 @dataclass(frozen=True)

@@ -14,6 +14,7 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
+from estimation_nodes.core import errors
 from estimation_nodes.core.kalman import linear as kalman
 from estimation_nodes.core.kalman.models import (
     GaussianState,
@@ -26,10 +27,6 @@ from estimation_nodes.core.validation import FloatArray
 def _overflow_checked_by_commit() -> np.errstate:
     """numpy's overflow warnings are noise here: ``_commit`` refuses any non-finite result."""
     return np.errstate(over="ignore", invalid="ignore")
-
-
-class NonFiniteResultError(ValueError):
-    """A step whose result would not be finite (an extreme input): nothing was changed."""
 
 
 class PositionEstimate(NamedTuple):
@@ -192,7 +189,7 @@ class KalmanFilter:
         # Python's isfinite over a few values beats two numpy ufunc calls.
         if not (all(map(math.isfinite, x.tolist())) and all(map(math.isfinite, P.ravel().tolist()))
                 and (nis is None or math.isfinite(nis))):
-            raise NonFiniteResultError(
+            raise errors.NonFiniteResultError(
                 "the result would not be finite (the input is too extreme for the current "
                 "estimate); estimate kept")
         self.x, self.P = x, P
@@ -204,6 +201,6 @@ def _one(name: str, value: float | Sequence[float]) -> float:
     """A number given alone or as a one-element sequence."""
     if isinstance(value, Sequence) or isinstance(value, np.ndarray):
         if len(value) != 1:
-            raise kalman.InputSizeError(f"{name}: expected 1 value, got {len(value)}")
+            raise errors.InputSizeError(f"{name}: expected 1 value, got {len(value)}")
         return float(value[0])
     return float(value)

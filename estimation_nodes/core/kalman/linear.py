@@ -16,6 +16,7 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
+from estimation_nodes.core.errors import InputSizeError
 from estimation_nodes.core.kalman.models import LinearGaussianModel
 from estimation_nodes.core.validation import FloatArray
 
@@ -80,10 +81,6 @@ def _symmetric(matrix: FloatArray) -> FloatArray:
     result = matrix + matrix.T
     result *= 0.5
     return result
-
-
-class InputSizeError(ValueError):
-    """An input or measurement with another number of values than the model takes."""
 
 
 def _as_vector(name: str, value: object, size: int) -> FloatArray:

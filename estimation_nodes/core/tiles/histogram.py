@@ -22,6 +22,7 @@ from types import ModuleType
 
 import numpy as np
 
+from estimation_nodes.core.errors import ZeroEvidenceError
 from estimation_nodes.core.tiles.models import MotionKernel
 from estimation_nodes.core.validation import FloatArray
 
@@ -31,10 +32,6 @@ from estimation_nodes.core.validation import FloatArray
 #: cached compilation (about 0.5 s) pay back within a few steps. Smaller
 #: worlds never import numba, so small nodes start as fast as before.
 COMPILED_MIN_CELLS = 1 << 16
-
-
-class ZeroEvidenceError(ValueError):
-    """An observation that every cell of the belief rules out: p(z) = 0."""
 
 
 def uniform(size: int) -> FloatArray:

@@ -1,0 +1,22 @@
+"""The core's exceptions: one hierarchy, so a caller can catch what the core refuses.
+
+Every one is a ``ValueError`` (the argument was wrong, not the program) whose
+message names the argument and says what was expected. A step that raises has
+changed nothing: the caller's belief or estimate is as it was.
+"""
+
+
+class EstimationError(ValueError):
+    """An input that a model or filter step refuses."""
+
+
+class ZeroEvidenceError(EstimationError):
+    """An observation that every state of the belief rules out: p(z) = 0."""
+
+
+class InputSizeError(EstimationError):
+    """An input or measurement with another number of values than the model takes."""
+
+
+class NonFiniteResultError(EstimationError):
+    """A step whose result would not be finite (an extreme input)."""
