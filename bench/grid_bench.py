@@ -36,8 +36,10 @@ sys.path.insert(0, str(BENCH))
 sys.path.insert(1, str(BENCH.parent))
 from timing import table  # noqa: E402
 
+from estimation_nodes.core.grid import likelihood_field  # noqa: E402
 from estimation_nodes.core.grid import steps as grid  # noqa: E402
 from estimation_nodes.params import map_files as maps  # noqa: E402
+from estimation_nodes.params.grid import default_odometry_noise, default_sensor_field  # noqa: E402
 
 DELTA = (0.1, 0.25, 0.05)
 
@@ -114,13 +116,13 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
     occupancy = maps.read_map_file(BENCH.parent / "maps" / "office.yaml")
-    model = maps.grid_model(occupancy, 0.1, 72, maps.SensorField(), 5_000_000)
+    model = likelihood_field.grid_model(occupancy, 0.1, 72, default_sensor_field(), 5_000_000)
     rng = np.random.default_rng(0)
     belief = rng.random(model.shape) * model.free[None]
     belief /= belief.sum()
     ranges = rng.uniform(0.3, 8.0, 60)
     angles = np.linspace(-math.pi, math.pi, 60, endpoint=False)
-    noise = grid.OdometryNoise()
+    noise = default_odometry_noise()
     grid.compiled_kernels(belief.size)             # compile or load before timing
     copy = timed(lambda: belief.copy(), args.repeats)[0]
     floors = {"prediction": 4 * copy, "correction": copy}

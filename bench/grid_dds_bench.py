@@ -77,7 +77,7 @@ def main() -> None:
     odom_pub = node.create_publisher(Odometry, "odom", 50)
     scan_pub = node.create_publisher(LaserScan, "scan", 10)
     occupancy = maps.read_map_file(MAP)
-    world = maps.planar_world(occupancy)
+    world = planar.planar_world(occupancy)
     rng = np.random.default_rng(0)
     pose = (-8.0, -8.0, 0.0)
     angles = -math.pi + 2 * math.pi * np.arange(180) / 180

@@ -31,12 +31,16 @@ import numpy as np
 BENCH = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH))
 sys.path.insert(1, str(BENCH.parent))
+from dataclasses import replace  # noqa: E402
+
 from timing import table  # noqa: E402
 
+from estimation_nodes.core.grid import likelihood_field  # noqa: E402
 from estimation_nodes.core.grid import steps as grid  # noqa: E402
 from estimation_nodes.core.grid.localization import GridLocalization  # noqa: E402
 from estimation_nodes.core.sim import planar  # noqa: E402
 from estimation_nodes.params import map_files as maps  # noqa: E402
+from estimation_nodes.params.grid import default_odometry_noise, default_sensor_field  # noqa: E402
 
 RATE_HZ = 10.0
 BEAMS = 180
@@ -47,10 +51,10 @@ MAPS = {"corridor": 4.0, "office": 12.0}          # map -> laser range (m)
 
 def run(name: str, max_range: float, seed: int, seconds: float, kidnap: bool) -> dict:
     occupancy = maps.read_map_file(BENCH.parent / "maps" / f"{name}.yaml")
-    sensor = maps.SensorField(max_range=max_range)
-    model = maps.grid_model(occupancy, 0.1, 72, sensor, 5_000_000)
-    world = maps.planar_world(occupancy)
-    noise = grid.OdometryNoise()
+    sensor = replace(default_sensor_field(), max_range=max_range)
+    model = likelihood_field.grid_model(occupancy, 0.1, 72, sensor, 5_000_000)
+    world = planar.planar_world(occupancy)
+    noise = default_odometry_noise()
     rng = np.random.default_rng(seed)
     localization = GridLocalization(model, noise, 0.25, 0.2, 1.0, kidnap_probability=1e-6)
     pose = planar.free_place(world, rng, 0.25)

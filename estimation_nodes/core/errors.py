@@ -20,3 +20,7 @@ class InputSizeError(EstimationError):
 
 class NonFiniteResultError(EstimationError):
     """A step whose result would not be finite (an extreme input)."""
+
+
+class MapError(EstimationError):
+    """A map that cannot be used; the message names the field and says why."""

@@ -45,11 +45,8 @@ from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
 from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
-from estimation_nodes.params.map_files import (
-    MapError,
-    build_grid_localizer_settings,
-    occupancy_from_message,
-)
+from estimation_nodes.params.grid import build_grid_localizer_settings
+from estimation_nodes.params.map_files import occupancy_from_message
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS
 
 #: How long a scan waits for the odometry of its time (as tf's message filter waits for a
@@ -116,7 +113,7 @@ class GridLocalizer(Node):
             occupancy = occupancy_from_message(info.width, info.height, info.resolution,
                                                origin, msg.data)
             model = self._settings.model_for(occupancy)
-        except MapError as error:
+        except errors.MapError as error:
             self._reject("bad_map", f"map dropped: {error}")
             return
         self.handled["map"] += 1

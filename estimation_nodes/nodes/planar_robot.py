@@ -22,19 +22,15 @@ from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.node import Node
 from sensor_msgs.msg import LaserScan
 
+from estimation_nodes.core import errors
 from estimation_nodes.core.sim import planar
 from estimation_nodes.nodes.grid_messages import fill_pose, occupancy_grid
 from estimation_nodes.nodes.parameters import ConfigurationError, declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.params.map_files import (
-    MapError,
-    odometry_noise,
-    planar_world,
-    read_map_file,
-    sensor_field,
-)
+from estimation_nodes.params.grid import odometry_noise, sensor_field
+from estimation_nodes.params.map_files import read_map_file
 from estimation_nodes.params.specs import PLANAR_ROBOT_SPECS
 
 #: A cmd_vel older than this (s) no longer drives the robot: it wanders again.
@@ -58,10 +54,10 @@ class PlanarRobot(Node):
         try:
             self._values, (occupancy, self._sensor, self._noise) = declare_and_build(
                 self, PLANAR_ROBOT_SPECS, _settings)
-        except MapError as error:
+        except errors.MapError as error:
             raise ConfigurationError(str(error)) from None
         values = self._values
-        self._world = planar_world(occupancy)
+        self._world = planar.planar_world(occupancy)
         seed = values["seed"]
         self._rng = np.random.default_rng(None if seed < 0 else seed)
         self._pose = self._initial_pose(values)

@@ -1,65 +1,24 @@
-"""Maps: map_server's YAML + image format and OccupancyGrid values to grid models.
+"""Maps as map_server reads them: its YAML + image format, and OccupancyGrid values.
 
 A map file is what nav2's map_server reads: a YAML file with ``image``
 (PGM or PNG, relative to the YAML file), ``resolution`` (m per pixel),
 ``origin`` ([x, y, yaw] of the lower-left pixel), ``negate``,
 ``occupied_thresh``, ``free_thresh`` and ``mode`` (trinary, scale or raw).
-Each bad field ends with a MapError naming it.
-
-The localizer's state grid is the map reduced by an integer factor to its
-``resolution``: a state cell is free when every map cell in it is free, and
-its likelihood field is the distance from the cell to the nearest occupied
-map cell (an exact Euclidean distance transform, scipy.ndimage), capped at
-``max_distance``.
+Each bad field ends with a MapError naming it. The state grid and the
+likelihood field computed from a map are the core's (core/grid/likelihood_field.py).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import yaml
 
-from estimation_nodes.core.grid.steps import GridModel
-
-#: OccupancyGrid cell values (nav_msgs): free, occupied, unknown.
-FREE, OCCUPIED, UNKNOWN = 0, 100, -1
-
-
-class MapError(ValueError):
-    """A map that cannot be used; the message names the field and says why."""
-
-
-@dataclass(frozen=True)
-class OccupancyMap:
-    """An occupancy grid as nav_msgs/OccupancyGrid holds it: ``cells`` (H, W) int8 of
-    FREE, OCCUPIED, UNKNOWN (or 1..99), row 0 at the origin (the image's last row)."""
-
-    cells: np.ndarray
-    resolution: float
-    origin: tuple[float, float]
-
-    def __post_init__(self) -> None:
-        if self.cells.ndim != 2 or 0 in self.cells.shape:
-            raise MapError(f"map: expected a 2-D grid of cells, got shape {self.cells.shape}")
-        if not (math.isfinite(self.resolution) and self.resolution > 0):
-            raise MapError(f"resolution: expected a finite value > 0, got {self.resolution}")
-        if not all(math.isfinite(v) for v in self.origin):
-            raise MapError(f"origin: expected finite x and y, got {list(self.origin)}")
-
-
-@dataclass(frozen=True)
-class SensorField:
-    """The likelihood-field model's parameters (Probabilistic Robotics 6.4; AMCL's names)."""
-
-    z_hit: float = 0.5
-    z_rand: float = 0.5
-    sigma_hit: float = 0.2
-    max_range: float = 12.0
-    max_distance: float = 2.0
+from estimation_nodes.core.errors import MapError
+from estimation_nodes.core.grid.occupancy import FREE, OCCUPIED, UNKNOWN, OccupancyMap
 
 
 def find_map_file(name: str) -> Path:
@@ -158,81 +117,6 @@ def occupancy_from_pixels(pixels: np.ndarray, negate: bool, occupied_thresh: flo
     return cells
 
 
-def grid_model(occupancy: OccupancyMap, resolution: float, heading_bins: int,
-               sensor: SensorField, max_states: int) -> GridModel:
-    """The localizer's state grid and likelihood field for ``occupancy``."""
-    factor = resolution / occupancy.resolution
-    if abs(factor - round(factor)) > 1e-6 or round(factor) < 1:
-        raise MapError(f"resolution: expected a whole multiple of the map's "
-                       f"{occupancy.resolution} m, got {resolution} m")
-    factor = int(round(factor))
-    rows, cols = (n // factor for n in occupancy.cells.shape)
-    if rows == 0 or cols == 0:
-        raise MapError(f"resolution: {resolution} m leaves no state cell on a map of "
-                       f"{occupancy.cells.shape[1]} x {occupancy.cells.shape[0]} cells")
-    states = rows * cols * heading_bins
-    if states > max_states:
-        raise MapError(f"max_states: the map makes {states} states ({cols} x {rows} cells x "
-                       f"{heading_bins} headings), more than max_states = {max_states}")
-    cells = occupancy.cells[:rows * factor, :cols * factor]
-    blocks = cells.reshape(rows, factor, cols, factor)
-    free = (blocks == FREE).all(axis=(1, 3))
-    if not free.any():
-        raise MapError("map: no free cell at this resolution")
-    distance = _distance_to_obstacles(cells, occupancy.resolution, sensor.max_distance)
-    nearest = distance.reshape(rows, factor, cols, factor).min(axis=(1, 3))
-    return GridModel(free=free, log_field=log_field(nearest, sensor),
-                     log_outside=float(log_field(np.array(sensor.max_distance), sensor)),
-                     resolution=resolution, origin=occupancy.origin,
-                     heading_bins=heading_bins)
-
-
-def log_field(distance: np.ndarray, sensor: SensorField) -> np.ndarray:
-    """log(z_hit exp(-d^2 / 2 sigma^2) + z_rand / max_range): a beam ending ``distance``
-    from the nearest obstacle (AMCL's likelihood field)."""
-    hit = sensor.z_hit * np.exp(-0.5 * (distance / sensor.sigma_hit) ** 2)
-    return np.log(hit + sensor.z_rand / sensor.max_range)
-
-
-def _distance_to_obstacles(cells: np.ndarray, resolution: float,
-                           max_distance: float) -> np.ndarray:
-    from scipy.ndimage import distance_transform_edt
-
-    occupied = cells >= OCCUPIED
-    if not occupied.any():
-        return np.full(cells.shape, max_distance)
-    return np.minimum(distance_transform_edt(~occupied) * resolution, max_distance)
-
-
-def sensor_field(values) -> SensorField:
-    """The likelihood field's parameters from a node's values (GRID_MODEL_SPECS)."""
-    return SensorField(z_hit=values["laser_z_hit"], z_rand=values["laser_z_rand"],
-                       sigma_hit=values["laser_sigma_hit"],
-                       max_range=values["laser_max_range"],
-                       max_distance=values["laser_likelihood_max_dist"])
-
-
-def odometry_noise(values):
-    from estimation_nodes.core.grid.steps import OdometryNoise
-
-    return OdometryNoise(alpha1=values["alpha1"], alpha2=values["alpha2"],
-                         alpha3=values["alpha3"], alpha4=values["alpha4"])
-
-
-def planar_world(occupancy: OccupancyMap):
-    """The simulated robot's world at the map's resolution: occupied cells stop beams;
-    the clearance keeps it off obstacles and out of unknown space."""
-    from scipy.ndimage import distance_transform_edt
-
-    from estimation_nodes.core.sim.planar import PlanarWorld
-
-    occupied = occupancy.cells >= OCCUPIED
-    blocked = occupied | (occupancy.cells == UNKNOWN)
-    clearance = distance_transform_edt(~blocked) * occupancy.resolution
-    return PlanarWorld(occupied=occupied, clearance=clearance,
-                       resolution=occupancy.resolution, origin=occupancy.origin)
-
-
 def occupancy_from_message(width: int, height: int, resolution: float,
                            origin: tuple[float, float, float], data) -> OccupancyMap:
     """An OccupancyGrid's fields as an OccupancyMap; a size that does not match its data,
@@ -249,33 +133,3 @@ def occupancy_from_message(width: int, height: int, resolution: float,
                         (float(origin[0]), float(origin[1])))
 
 
-@dataclass(frozen=True)
-class GridLocalizerSettings:
-    """The localizer's validated parameters; the map comes from map_file or the topic."""
-
-    sensor: SensorField
-    noise: object
-    resolution: float
-    heading_bins: int
-    max_states: int
-    #: From map_file, read and reduced at start-up; None: from the map topic.
-    map: OccupancyMap | None
-    model: GridModel | None
-
-    def model_for(self, occupancy: OccupancyMap) -> GridModel:
-        return grid_model(occupancy, self.resolution, self.heading_bins, self.sensor,
-                          self.max_states)
-
-
-def build_grid_localizer_settings(values) -> GridLocalizerSettings:
-    """Validate the localizer's parameters; with map_file set, read it and check that it
-    makes a state grid within max_states (a MapError names what is wrong)."""
-    sensor = sensor_field(values)
-    if not values["frame_id"].strip():
-        raise ValueError("frame_id: expected a frame name, got an empty string")
-    occupancy = read_map_file(Path(values["map_file"])) if values["map_file"] else None
-    model = grid_model(occupancy, values["resolution"], values["heading_bins"], sensor,
-                       values["max_states"]) if occupancy is not None else None
-    return GridLocalizerSettings(sensor, odometry_noise(values), values["resolution"],
-                                 values["heading_bins"], values["max_states"], occupancy,
-                                 model)

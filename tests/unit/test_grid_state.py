@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from estimation_nodes.core.grid import steps as grid
 from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.params.grid import default_odometry_noise
 from tests.unit.test_grid import small_model
 
 SECOND = 10**9
@@ -14,7 +14,7 @@ SECOND = 10**9
 
 def localization(**kwargs):
     model = small_model(rows=20, cols=20, obstacles=0.0)
-    return GridLocalization(model, grid.OdometryNoise(), 0.25, 0.2, 1.0, **kwargs)
+    return GridLocalization(model, default_odometry_noise(), 0.25, 0.2, 1.0, **kwargs)
 
 
 def test_the_first_scan_updates_once_odometry_is_there_then_only_after_motion():

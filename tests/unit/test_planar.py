@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from estimation_nodes.core.grid.occupancy import OCCUPIED, OccupancyMap
 from estimation_nodes.core.grid.steps import OdometryNoise
 from estimation_nodes.core.sim import planar
 from estimation_nodes.params import map_files as maps
@@ -14,8 +15,8 @@ from tests.conftest import REPO
 def box_world(size=40, resolution=0.1):
     """A square room of ``size`` cells with one-cell walls, origin at (0, 0)."""
     cells = np.zeros((size, size), dtype=np.int8)
-    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = maps.OCCUPIED
-    return maps.planar_world(maps.OccupancyMap(cells, resolution, (0.0, 0.0)))
+    cells[0, :] = cells[-1, :] = cells[:, 0] = cells[:, -1] = OCCUPIED
+    return planar.planar_world(OccupancyMap(cells, resolution, (0.0, 0.0)))
 
 
 def test_ray_cast_hits_the_walls_where_geometry_says():
@@ -36,7 +37,7 @@ def test_no_return_is_inf():
 
 def test_the_wanderer_never_comes_closer_than_its_radius_to_a_wall():
     occupancy = maps.read_map_file(REPO / "maps" / "office.yaml")
-    world = maps.planar_world(occupancy)
+    world = planar.planar_world(occupancy)
     rng = np.random.default_rng(1)
     pose = planar.free_place(world, rng, 0.25)
     wanderer = planar.Wanderer(rng, speed=0.5, turn_rate=1.0, radius=0.25)

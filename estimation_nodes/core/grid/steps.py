@@ -19,7 +19,7 @@ with the odometry motion model (5.4) and the likelihood-field sensor model
 - ``correct``: posterior and log evidence, as the 1-D filter's ``correct``.
 
 The map's rotation (an OccupancyGrid origin with yaw) is not supported here:
-the builder refuses it (params/maps.py).
+the state grid refuses it (core/grid/likelihood_field.py).
 """
 
 from __future__ import annotations
@@ -103,10 +103,10 @@ class OdometryNoise:
     of finite resolution can follow a robot whose odometry is slightly off.
     """
 
-    alpha1: float = 0.2
-    alpha2: float = 0.2
-    alpha3: float = 0.2
-    alpha4: float = 0.2
+    alpha1: float
+    alpha2: float
+    alpha3: float
+    alpha4: float
     floor_m: float = 0.02
     floor_rad: float = 0.02
 

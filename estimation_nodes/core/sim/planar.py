@@ -14,7 +14,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
+from estimation_nodes.core.grid.occupancy import OCCUPIED, UNKNOWN, OccupancyMap
 from estimation_nodes.core.grid.steps import OdometryNoise
 from estimation_nodes.core.validation import FloatArray
 
@@ -136,3 +138,13 @@ def free_place(world: PlanarWorld, rng: np.random.Generator, radius: float) -> P
 
 def _wrap(angle: float) -> float:
     return math.pi - (math.pi - angle) % (2 * math.pi)
+
+
+def planar_world(occupancy: OccupancyMap) -> PlanarWorld:
+    """The simulated robot's world at the map's resolution: occupied cells stop beams;
+    the clearance keeps it off obstacles and out of unknown space."""
+    occupied = occupancy.cells >= OCCUPIED
+    blocked = occupied | (occupancy.cells == UNKNOWN)
+    clearance = distance_transform_edt(~blocked) * occupancy.resolution
+    return PlanarWorld(occupied=occupied, clearance=clearance,
+                       resolution=occupancy.resolution, origin=occupancy.origin)

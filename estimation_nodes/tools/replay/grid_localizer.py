@@ -23,10 +23,8 @@ import numpy as np
 from estimation_nodes.core.grid.localization import GridLocalization
 from estimation_nodes.nodes.grid_messages import planar_pose
 from estimation_nodes.params import topics
-from estimation_nodes.params.map_files import (
-    build_grid_localizer_settings,
-    occupancy_from_message,
-)
+from estimation_nodes.params.grid import build_grid_localizer_settings
+from estimation_nodes.params.map_files import occupancy_from_message
 from estimation_nodes.params.param_files import read_node_parameters
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults
 from estimation_nodes.tools.recording.mcap import RecordingError

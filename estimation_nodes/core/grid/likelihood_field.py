@@ -1,0 +1,76 @@
+"""The likelihood-field sensor model (Probabilistic Robotics 6.4, AMCL's) and the state grid
+it is computed on.
+
+The localizer's state grid is the map reduced by an integer factor to its
+``resolution``: a state cell is free when every map cell in it is free, and
+its likelihood field is the distance from the cell to the nearest occupied
+map cell (an exact Euclidean distance transform, scipy.ndimage), capped at
+``max_distance``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimation_nodes.core.errors import MapError
+from estimation_nodes.core.grid.occupancy import FREE, OCCUPIED, OccupancyMap
+from estimation_nodes.core.grid.steps import GridModel
+
+
+@dataclass(frozen=True)
+class SensorField:
+    """The likelihood-field model's parameters (Probabilistic Robotics 6.4; AMCL's names)."""
+
+    z_hit: float
+    z_rand: float
+    sigma_hit: float
+    max_range: float
+    max_distance: float
+
+
+def grid_model(occupancy: OccupancyMap, resolution: float, heading_bins: int,
+               sensor: SensorField, max_states: int) -> GridModel:
+    """The localizer's state grid and likelihood field for ``occupancy``."""
+    factor = resolution / occupancy.resolution
+    if abs(factor - round(factor)) > 1e-6 or round(factor) < 1:
+        raise MapError(f"resolution: expected a whole multiple of the map's "
+                       f"{occupancy.resolution} m, got {resolution} m")
+    factor = int(round(factor))
+    rows, cols = (n // factor for n in occupancy.cells.shape)
+    if rows == 0 or cols == 0:
+        raise MapError(f"resolution: {resolution} m leaves no state cell on a map of "
+                       f"{occupancy.cells.shape[1]} x {occupancy.cells.shape[0]} cells")
+    states = rows * cols * heading_bins
+    if states > max_states:
+        raise MapError(f"max_states: the map makes {states} states ({cols} x {rows} cells x "
+                       f"{heading_bins} headings), more than max_states = {max_states}")
+    cells = occupancy.cells[:rows * factor, :cols * factor]
+    blocks = cells.reshape(rows, factor, cols, factor)
+    free = (blocks == FREE).all(axis=(1, 3))
+    if not free.any():
+        raise MapError("map: no free cell at this resolution")
+    distance = distance_to_obstacles(cells, occupancy.resolution, sensor.max_distance)
+    nearest = distance.reshape(rows, factor, cols, factor).min(axis=(1, 3))
+    return GridModel(free=free, log_field=log_field(nearest, sensor),
+                     log_outside=float(log_field(np.array(sensor.max_distance), sensor)),
+                     resolution=resolution, origin=occupancy.origin,
+                     heading_bins=heading_bins)
+
+
+def log_field(distance: np.ndarray, sensor: SensorField) -> np.ndarray:
+    """log(z_hit exp(-d^2 / 2 sigma^2) + z_rand / max_range): a beam ending ``distance``
+    from the nearest obstacle (AMCL's likelihood field)."""
+    hit = sensor.z_hit * np.exp(-0.5 * (distance / sensor.sigma_hit) ** 2)
+    return np.log(hit + sensor.z_rand / sensor.max_range)
+
+
+def distance_to_obstacles(cells: np.ndarray, resolution: float,
+                           max_distance: float) -> np.ndarray:
+    from scipy.ndimage import distance_transform_edt
+
+    occupied = cells >= OCCUPIED
+    if not occupied.any():
+        return np.full(cells.shape, max_distance)
+    return np.minimum(distance_transform_edt(~occupied) * resolution, max_distance)
