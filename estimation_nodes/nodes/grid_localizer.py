@@ -61,7 +61,7 @@ class GridLocalizer(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.node_name, **kwargs)
-        self._values, self._settings = declare_and_build(
+        _, self._settings = declare_and_build(
             self, GRID_LOCALIZER_SPECS, build_grid_localizer_settings)
         self.handled: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
@@ -86,16 +86,13 @@ class GridLocalizer(Node):
                                  self._on_initial_pose, 10)
         self.create_service(Trigger, "~/global_localization", self._on_global_localization)
         self.create_service(Trigger, "~/reset", self._on_reset)
-        self.create_timer(self._values["diagnostics_period"], self._publish_diagnostics)
+        self.create_timer(self._settings.diagnostics_period, self._publish_diagnostics)
         #: A scan waiting for the odometry of its time: (message, stamp ns, deadline).
         self._waiting_scan: tuple[LaserScan, int | None, float] | None = None
         self.create_timer(SCAN_WAIT_S / 4, self._scan_waited_out)
 
     def _start(self, model: grid.GridModel) -> None:
-        self.localization = GridLocalization(
-            model, self._settings.noise, self._values["update_min_d"],
-            self._values["update_min_a"], self._values["max_odom_jump"],
-            self._values["kidnap_probability"])
+        self.localization = self._settings.localization(model)
         rows, cols = model.free.shape
         self.get_logger().info(
             f"ready: {cols} x {rows} cells of {model.resolution} m, {model.heading_bins} "
@@ -127,7 +124,7 @@ class GridLocalizer(Node):
         if self.localization is None:
             return
         if not self.localization.on_odometry(pose, _stamp_ns(msg.header.stamp)):
-            self._reject("odom_jump", f"odom jumped more than {self._values['max_odom_jump']} m:"
+            self._reject("odom_jump", f"odom jumped more than {self._settings.max_odom_jump} m:"
                          " not taken as motion; followed from the new pose")
             return
         self.handled["odom"] += 1
@@ -166,7 +163,7 @@ class GridLocalizer(Node):
             self.handled["scan_without_motion"] += 1
             return
         ranges, angles, nan = scan_beams(msg, self._settings.sensor.max_range,
-                                         self._values["max_beams"])
+                                         self._settings.max_beams)
         if nan:
             self.rejected["nan_ranges"] += nan
         started = time.perf_counter()
@@ -215,18 +212,18 @@ class GridLocalizer(Node):
     def _publish(self, stamp: Time | None = None) -> None:
         assert self.localization is not None
         model = self.localization.model
-        estimate = self.localization.estimate(self._values["quality_radius"],
-                                              math.radians(self._values["quality_angle"]))
+        estimate = self.localization.estimate(self._settings.quality_radius,
+                                              self._settings.quality_angle)
         stamp_msg = (stamp or self.get_clock().now()).to_msg()
         # The quality first: a monitor that shows it beside the pose then has it in time.
         self._quality_pub.publish(Float64(data=estimate.quality))
         msg = pose_with_covariance(self._pose_msg, estimate.pose, estimate.covariance)
         msg.header.stamp = stamp_msg
-        msg.header.frame_id = self._values["frame_id"]
+        msg.header.frame_id = self._settings.frame_id
         self._pose_pub.publish(msg)
         self._belief_pub.publish(occupancy_grid(self.localization.belief_map(),
                                                 model.resolution, model.origin,
-                                                self._values["frame_id"], stamp_msg))
+                                                self._settings.frame_id, stamp_msg))
 
     def _reject(self, reason: str, message: str) -> None:
         self.rejected[reason] += 1
@@ -236,8 +233,8 @@ class GridLocalizer(Node):
         values: dict[str, Any] = {"map": "waiting for map" if self.localization is None
                                   else "loaded"}
         if self.localization is not None:
-            estimate = self.localization.estimate(self._values["quality_radius"],
-                                                  math.radians(self._values["quality_angle"]))
+            estimate = self.localization.estimate(self._settings.quality_radius,
+                                                  self._settings.quality_angle)
             values.update({
                 "pose_x": f"{estimate.pose[0]:.3f}", "pose_y": f"{estimate.pose[1]:.3f}",
                 "pose_yaw_deg": f"{math.degrees(estimate.pose[2]):.1f}",

@@ -29,19 +29,11 @@ from estimation_nodes.nodes.parameters import ConfigurationError, declare_and_bu
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.params.grid import odometry_noise, sensor_field
-from estimation_nodes.params.map_files import read_map_file
+from estimation_nodes.params.grid import PlanarRobotSettings, build_planar_robot_settings
 from estimation_nodes.params.specs import PLANAR_ROBOT_SPECS
 
 #: A cmd_vel older than this (s) no longer drives the robot: it wanders again.
 COMMAND_TIMEOUT_S = 0.5
-
-
-def _settings(values):
-    if not values["map_file"]:
-        raise ValueError("map_file: the simulated robot needs a map (map_server's YAML)")
-    occupancy = read_map_file(values["map_file"])
-    return occupancy, sensor_field(values), odometry_noise(values)
 
 
 class PlanarRobot(Node):
@@ -52,23 +44,25 @@ class PlanarRobot(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(self.node_name, **kwargs)
         try:
-            self._values, (occupancy, self._sensor, self._noise) = declare_and_build(
-                self, PLANAR_ROBOT_SPECS, _settings)
+            _, settings = declare_and_build(self, PLANAR_ROBOT_SPECS,
+                                            build_planar_robot_settings)
         except errors.MapError as error:
             raise ConfigurationError(str(error)) from None
-        values = self._values
+        self._settings = settings
+        occupancy = settings.map
+        self._sensor, self._noise = settings.sensor, settings.noise
         self._world = planar.planar_world(occupancy)
-        seed = values["seed"]
+        seed = settings.seed
         self._rng = np.random.default_rng(None if seed < 0 else seed)
-        self._pose = self._initial_pose(values)
+        self._pose = self._initial_pose(settings)
         self._odom_pose: planar.Pose = (0.0, 0.0, 0.0)
-        self._wanderer = planar.Wanderer(self._rng, values["speed"], values["turn_rate"],
-                                         values["robot_radius"])
+        self._wanderer = planar.Wanderer(self._rng, settings.speed, settings.turn_rate,
+                                         settings.robot_radius)
         self._command: tuple[float, float, float] | None = None    # (v, w, when)
-        self._dt = 1.0 / values["rate_hz"]
+        self._dt = 1.0 / settings.rate_hz
         self._elapsed = 0.0
         self._kidnapped = False
-        beams = values["beams"]
+        beams = settings.beams
         self._angles = -math.pi + 2 * math.pi * np.arange(beams) / beams
         map_pub = self.create_publisher(OccupancyGrid, topics.MAP, latched_qos(1))
         map_pub.publish(occupancy_grid(occupancy.cells, occupancy.resolution, occupancy.origin,
@@ -83,18 +77,15 @@ class PlanarRobot(Node):
             f"({self._pose[0]:.2f}, {self._pose[1]:.2f}, {math.degrees(self._pose[2]):.0f} "
             f"deg), seed {seed}")
 
-    def _initial_pose(self, values) -> planar.Pose:
-        given = values["initial_pose"]
-        if hasattr(given, "__len__") and len(given):
-            if len(given) != 3 or not all(math.isfinite(v) for v in given):
-                raise ConfigurationError(f"initial_pose: expected [x, y, yaw], got {list(given)}")
-            pose = (float(given[0]), float(given[1]), float(given[2]))
-            if self._world.clearance_at(pose[0], pose[1]) <= values["robot_radius"]:
-                raise ConfigurationError(f"initial_pose: {list(given)} is not "
-                                         f"{values['robot_radius']} m from every obstacle")
+    def _initial_pose(self, settings: PlanarRobotSettings) -> planar.Pose:
+        pose = settings.initial_pose
+        if pose is not None:
+            if self._world.clearance_at(pose[0], pose[1]) <= settings.robot_radius:
+                raise ConfigurationError(f"initial_pose: {list(pose)} is not "
+                                         f"{settings.robot_radius} m from every obstacle")
             return pose
         try:
-            return planar.free_place(self._world, self._rng, values["robot_radius"])
+            return planar.free_place(self._world, self._rng, settings.robot_radius)
         except ValueError as error:
             raise ConfigurationError(str(error)) from None
 
@@ -109,22 +100,22 @@ class PlanarRobot(Node):
         return self._wanderer.step(self._world, self._pose, self._dt)
 
     def _step(self) -> None:
-        values = self._values
-        if values["duration"] and self._elapsed >= values["duration"]:
-            if values["exit_when_done"]:
+        settings = self._settings
+        if settings.duration and self._elapsed >= settings.duration:
+            if settings.exit_when_done:
                 raise SystemExit(0)
             return
         self._elapsed += self._dt
         delta = self._true_motion()
         moved = planar.compose(self._pose, delta)
-        if self._world.clearance_at(moved[0], moved[1]) > values["robot_radius"]:
+        if self._world.clearance_at(moved[0], moved[1]) > settings.robot_radius:
             self._pose = moved
         else:
             delta = (0.0, 0.0, 0.0)        # blocked: it stays where it is
-        if values["kidnap_after"] and not self._kidnapped \
-                and self._elapsed >= values["kidnap_after"]:
+        if settings.kidnap_after and not self._kidnapped \
+                and self._elapsed >= settings.kidnap_after:
             self._kidnapped = True
-            self._pose = planar.free_place(self._world, self._rng, values["robot_radius"])
+            self._pose = planar.free_place(self._world, self._rng, settings.robot_radius)
             self.get_logger().info(f"kidnapped to ({self._pose[0]:.2f}, {self._pose[1]:.2f})")
         self._odom_pose = planar.compose(self._odom_pose,
                                          planar.sample_odometry(delta, self._noise, self._rng))
@@ -147,8 +138,8 @@ class PlanarRobot(Node):
     def _publish_scan(self, stamp) -> None:
         sensor = self._sensor
         true_ranges = planar.ray_cast(self._world, self._pose, self._angles, sensor.max_range)
-        ranges = planar.noisy_ranges(true_ranges, self._rng, self._values["scan_noise_std"],
-                                     self._values["scan_random_fraction"], sensor.max_range)
+        ranges = planar.noisy_ranges(true_ranges, self._rng, self._settings.scan_noise_std,
+                                     self._settings.scan_random_fraction, sensor.max_range)
         scan = LaserScan()
         scan.header.stamp, scan.header.frame_id = stamp, "base_link"
         scan.angle_min = float(self._angles[0])

@@ -3,16 +3,18 @@ values (GRID_LOCALIZER_SPECS, PLANAR_ROBOT_SPECS in params/specs.py)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from estimation_nodes.core.grid.likelihood_field import SensorField, grid_model
+from estimation_nodes.core.grid.localization import GridLocalization
 from estimation_nodes.core.grid.occupancy import OccupancyMap
 from estimation_nodes.core.grid.steps import GridModel, OdometryNoise
 from estimation_nodes.params.map_files import read_map_file
-from estimation_nodes.params.specs import GRID_MODEL_SPECS, spec_defaults
+from estimation_nodes.params.specs import GRID_MODEL_SPECS, UNSET, spec_defaults
 
 
 def sensor_field(values: Mapping[str, Any]) -> SensorField:
@@ -41,10 +43,25 @@ class GridLocalizerSettings:
     #: From map_file, read and reduced at start-up; None: from the map topic.
     map: OccupancyMap | None
     model: GridModel | None
+    update_min_d: float
+    update_min_a: float
+    max_odom_jump: float
+    kidnap_probability: float
+    max_beams: int
+    quality_radius: float
+    #: quality_angle, in radians.
+    quality_angle: float
+    frame_id: str
+    diagnostics_period: float
 
     def model_for(self, occupancy: OccupancyMap) -> GridModel:
         return grid_model(occupancy, self.resolution, self.heading_bins, self.sensor,
                           self.max_states)
+
+    def localization(self, model: GridModel) -> GridLocalization:
+        """A new belief on ``model`` with this update rule, uniform over the free cells."""
+        return GridLocalization(model, self.noise, self.update_min_d, self.update_min_a,
+                                self.max_odom_jump, self.kidnap_probability)
 
 
 def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSettings:
@@ -56,9 +73,56 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
     occupancy = read_map_file(Path(values["map_file"])) if values["map_file"] else None
     model = grid_model(occupancy, values["resolution"], values["heading_bins"], sensor,
                        values["max_states"]) if occupancy is not None else None
-    return GridLocalizerSettings(sensor, odometry_noise(values), values["resolution"],
-                                 values["heading_bins"], values["max_states"], occupancy,
-                                 model)
+    return GridLocalizerSettings(
+        sensor, odometry_noise(values), values["resolution"], values["heading_bins"],
+        values["max_states"], occupancy, model, update_min_d=values["update_min_d"],
+        update_min_a=values["update_min_a"], max_odom_jump=values["max_odom_jump"],
+        kidnap_probability=values["kidnap_probability"], max_beams=values["max_beams"],
+        quality_radius=values["quality_radius"],
+        quality_angle=math.radians(values["quality_angle"]), frame_id=values["frame_id"],
+        diagnostics_period=values["diagnostics_period"])
+
+
+@dataclass(frozen=True)
+class PlanarRobotSettings:
+    """The simulated robot's validated parameters (PLANAR_ROBOT_SPECS)."""
+
+    map: OccupancyMap
+    sensor: SensorField
+    noise: OdometryNoise
+    seed: int
+    rate_hz: float
+    speed: float
+    turn_rate: float
+    robot_radius: float
+    beams: int
+    scan_noise_std: float
+    scan_random_fraction: float
+    #: [x, y, yaw], or None: a free place drawn from the seed.
+    initial_pose: tuple[float, float, float] | None
+    duration: float
+    exit_when_done: bool
+    kidnap_after: float
+
+
+def build_planar_robot_settings(values: Mapping[str, Any]) -> PlanarRobotSettings:
+    """Validate the simulated robot's parameters and read its map (it needs one)."""
+    if not values["map_file"]:
+        raise ValueError("map_file: the simulated robot needs a map (map_server's YAML)")
+    given = values["initial_pose"]
+    initial_pose = None
+    if given is not UNSET and len(given):
+        if len(given) != 3 or not all(math.isfinite(v) for v in given):
+            raise ValueError(f"initial_pose: expected [x, y, yaw], got {list(given)}")
+        initial_pose = (float(given[0]), float(given[1]), float(given[2]))
+    return PlanarRobotSettings(
+        read_map_file(Path(values["map_file"])), sensor_field(values), odometry_noise(values),
+        seed=values["seed"], rate_hz=values["rate_hz"], speed=values["speed"],
+        turn_rate=values["turn_rate"], robot_radius=values["robot_radius"],
+        beams=values["beams"], scan_noise_std=values["scan_noise_std"],
+        scan_random_fraction=values["scan_random_fraction"], initial_pose=initial_pose,
+        duration=values["duration"], exit_when_done=values["exit_when_done"],
+        kidnap_after=values["kidnap_after"])
 
 
 def default_sensor_field() -> SensorField:

@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation_nodes.core.grid.localization import GridLocalization
 from estimation_nodes.nodes.grid_messages import planar_pose
 from estimation_nodes.params import topics
 from estimation_nodes.params.grid import build_grid_localizer_settings
@@ -89,9 +88,7 @@ def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> Gr
         model = settings.model_for(occupancy_from_message(
             info.width, info.height, info.resolution,
             (info.origin.position.x, info.origin.position.y, 0.0), maps[0].data))
-    localization = GridLocalization(model, settings.noise,
-                                    values["update_min_d"], values["update_min_a"],
-                                    values["max_odom_jump"], values["kidnap_probability"])
+    localization = settings.localization(model)
     online, quality = {}, float("nan")
     for topic, msg in messages:
         if topic == f"/{topics.LOCALIZATION_QUALITY}":
@@ -104,7 +101,7 @@ def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> Gr
                     key=lambda item: item[:2])
     comparison = GridComparison()
     started = False
-    radius, angle = values["quality_radius"], math.radians(values["quality_angle"])
+    radius, angle = settings.quality_radius, settings.quality_angle
     for stamp, _rank, topic, msg in inputs:
         if topic == f"/{topics.ODOM}":
             localization.on_odometry(planar_pose(msg.pose.pose), stamp)
@@ -114,7 +111,7 @@ def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> Gr
         started = True
         if not localization.due(stamp):
             continue
-        ranges, angles, _ = scan_beams(msg, settings.sensor.max_range, values["max_beams"])
+        ranges, angles, _ = scan_beams(msg, settings.sensor.max_range, settings.max_beams)
         localization.update(ranges, angles, stamp)
         _compare(comparison, stamp, online.get(stamp), localization.estimate(radius, angle),
                  tolerance)
