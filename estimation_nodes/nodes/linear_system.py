@@ -22,7 +22,7 @@ from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.params.estimator import build_linear_system_settings
+from estimation_nodes.params.simulators import build_linear_system_settings
 from estimation_nodes.params.specs import LINEAR_SYSTEM_SPECS
 from estimation_nodes.params.wording import plural
 

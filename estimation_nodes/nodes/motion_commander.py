@@ -28,7 +28,7 @@ from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS
 from estimation_nodes.nodes.subscribers import missing_subscribers
 from estimation_nodes.params import topics
-from estimation_nodes.params.estimator import build_commander_settings
+from estimation_nodes.params.simulators import build_commander_settings
 from estimation_nodes.params.specs import COMMANDER_SPECS
 from estimation_nodes.params.wording import plural
 

@@ -24,7 +24,7 @@ from estimation_nodes.nodes.parameters import (
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.params import topics
-from estimation_nodes.params.estimator import build_sensor_settings
+from estimation_nodes.params.simulators import build_sensor_settings
 from estimation_nodes.params.specs import SENSOR_SPECS
 
 

@@ -1,8 +1,9 @@
 """Every node's parameters in one table: name, default, description, bounds.
 
 No rclpy here: the nodes declare these specs (nodes/parameters.py), the
-builders turn their values into core models (params/builders.py), and the
-offline tools read parameter files against the same defaults.
+settings modules turn their values into core models (params/estimator.py,
+simulators.py, grid.py, with the bounds stated here), the node pages in docs/
+show them, and the offline tools read parameter files against the same defaults.
 """
 
 from __future__ import annotations
@@ -324,3 +325,12 @@ NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "grid_localizer": GRID_LOCALIZER_SPECS,
     "planar_robot": PLANAR_ROBOT_SPECS,
 }
+
+
+def spec_named(name: str, specs: tuple[ParamSpec, ...] | None = None) -> ParamSpec:
+    """Parameter ``name``'s spec: from ``specs`` when given (a node's own, for a name two
+    nodes use differently, such as rate_hz), else from whichever node declares it."""
+    for candidate in specs or (spec for table in NODE_SPECS.values() for spec in table):
+        if candidate.name == name:
+            return candidate
+    raise KeyError(name)

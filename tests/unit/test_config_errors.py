@@ -128,7 +128,7 @@ def test_models_are_immutable():
 
 
 def test_world_file_replaces_world(tmp_path):
-    from estimation_nodes.params.estimator import build_histogram_model
+    from estimation_nodes.params.models import build_histogram_model
     from estimation_nodes.params.specs import ESTIMATOR_SPECS, spec_defaults
 
     path = tmp_path / "world.txt"
@@ -147,7 +147,7 @@ def test_world_file_replaces_world(tmp_path):
     (b"\xff\xfe", "cannot read"),
 ])
 def test_world_file_errors(tmp_path, content, message):
-    from estimation_nodes.params.estimator import build_histogram_model
+    from estimation_nodes.params.models import build_histogram_model
     from estimation_nodes.params.specs import ESTIMATOR_SPECS, spec_defaults
 
     path = tmp_path / "world.txt"

@@ -5,9 +5,9 @@ import pytest
 
 from estimation_nodes.core.kalman.models import LinearGaussianModel
 from estimation_nodes.core.sim import draws as simulation
-from estimation_nodes.params.estimator import (
+from estimation_nodes.params.estimator import build_kalman_settings
+from estimation_nodes.params.simulators import (
     build_commander_settings,
-    build_kalman_settings,
     build_linear_system_settings,
 )
 from estimation_nodes.params.specs import COMMANDER_SPECS, ESTIMATOR_SPECS, spec_defaults
