@@ -82,7 +82,7 @@ class Driver:
         from rclpy.node import Node
         from std_msgs.msg import Float64MultiArray, String
 
-        from estimation_nodes.nodes.messages import to_multiarray
+        from estimation_nodes.nodes import wire
         from estimation_nodes.nodes.qos import INPUT_QOS
 
         self.node = Node(f"bench_driver_{answer_topic}")
@@ -94,7 +94,7 @@ class Driver:
         if vectors:   # position measurements of the tracking scenario
             self.pub = self.node.create_publisher(
                 Float64MultiArray, "kalman_measurement", INPUT_QOS)
-            self.messages = [to_multiarray(np.array(z), "z") for z in ([0.1, 0.2], [0.3, 0.1])]
+            self.messages = [wire.vector(np.array(z), "z") for z in ([0.1, 0.2], [0.3, 0.1])]
         else:
             self.pub = self.node.create_publisher(String, "tile_observation", INPUT_QOS)
             self.messages = [String(data=name) for name in ("dark", "bright")]

@@ -16,8 +16,8 @@ from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray
 
 from estimation_nodes.core.sim import draws as simulation
+from estimation_nodes.nodes import wire
 from estimation_nodes.nodes.held_publisher import HeldPublisher, subscribe_when_ready
-from estimation_nodes.nodes.messages import to_multiarray
 from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
@@ -72,8 +72,8 @@ class LinearSystem(Node):
                 throttle_duration_sec=5.0)
             return
         self._state = state
-        self._truth_pub.publish(to_multiarray(self._state, "state"))
-        self._measurement_pub.publish(to_multiarray(z, "measurement"))
+        self._truth_pub.publish(wire.vector(self._state, "state"))
+        self._measurement_pub.publish(wire.vector(z, "measurement"))
 
 
 main = main_for(LinearSystem)

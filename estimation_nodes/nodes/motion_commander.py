@@ -20,7 +20,7 @@ import numpy as np
 from rclpy.node import Node
 from std_msgs.msg import Float64MultiArray, Int32
 
-from estimation_nodes.nodes.messages import to_multiarray
+from estimation_nodes.nodes import wire
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
 )
@@ -47,7 +47,7 @@ class MotionCommander(Node):
         # Each command as the message it goes out as: Int32 on motion_cmd, or a vector
         # on kalman_input when input_vectors is set.
         if settings.vectors:
-            self._messages: list[Any] = [to_multiarray(np.array(v), "input")
+            self._messages: list[Any] = [wire.vector(np.array(v), "input")
                                          for v in settings.vectors]
             self._publisher = self.create_publisher(
                 Float64MultiArray, topics.KALMAN_INPUT, INPUT_QOS)

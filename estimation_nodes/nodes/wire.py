@@ -17,6 +17,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -222,3 +223,10 @@ class MultiarrayReader:
             self._prefix, self._length = bytes(data[:prefix_length]), len(data)
             self._dtype = values.dtype
         return values
+
+
+def from_state_message(msg: Any) -> tuple[np.ndarray, np.ndarray]:
+    """x and P back from a received state message (the layout of ``state``)."""
+    n = msg.layout.dim[1].size
+    values = np.frombuffer(msg.data, dtype=np.float64)
+    return values[:n].copy(), values[n:].reshape(n, n).copy()

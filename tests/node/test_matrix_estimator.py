@@ -12,16 +12,16 @@ from estimation_nodes.core.kalman.models import GaussianState
 from estimation_nodes.core.sim import draws as simulation
 from estimation_nodes.nodes.estimator import Estimator
 from estimation_nodes.nodes.linear_system import LinearSystem
-from estimation_nodes.nodes.messages import (
-    from_state_message,
+from estimation_nodes.nodes.motion_commander import MotionCommander
+from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
+from estimation_nodes.nodes.wire import from_state_message
+from estimation_nodes.params.estimator import build_kalman_settings
+from tests.conftest import spin_until
+from tests.node.message_objects import (
     to_multiarray,
     to_pose_with_covariance,
     to_state_message,
 )
-from estimation_nodes.nodes.motion_commander import MotionCommander
-from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
-from estimation_nodes.params.estimator import build_kalman_settings
-from tests.conftest import spin_until
 from tests.unit.test_matrix_settings import TRACKING, values
 
 OUTPUTS = {

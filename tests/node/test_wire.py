@@ -15,7 +15,7 @@ from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from estimation_nodes.core.geometry import quaternion_from_rpy
 from estimation_nodes.nodes import wire
-from estimation_nodes.nodes.messages import (
+from tests.node.message_objects import (
     to_multiarray,
     to_pose_with_covariance,
     to_state_message,

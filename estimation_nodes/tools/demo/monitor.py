@@ -17,8 +17,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message
 
-from estimation_nodes.nodes.messages import from_state_message
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
+from estimation_nodes.nodes.wire import from_state_message
 from estimation_nodes.params import topics
 from estimation_nodes.tools.recording.run_record import RunRecord
 

@@ -1,4 +1,5 @@
-"""Conversions between numpy arrays and the messages the nodes publish and take."""
+"""The package's messages built as rclpy message objects, as a plain rclpy node would: the
+oracle that nodes/wire.py's bytes are checked against, and inputs for node tests."""
 
 from __future__ import annotations
 
@@ -39,13 +40,6 @@ def to_state_message(x: np.ndarray, P: np.ndarray) -> Float64MultiArray:
     return _multiarray(np.concatenate([x, P.ravel()]), [
         MultiArrayDimension(label=label, size=size, stride=stride)
         for label, size, stride in state_dims(x.size)])
-
-
-def from_state_message(msg: Float64MultiArray) -> tuple[np.ndarray, np.ndarray]:
-    """x and P back from ``to_state_message``."""
-    n = msg.layout.dim[1].size
-    values = np.frombuffer(msg.data, dtype=np.float64)
-    return values[:n].copy(), values[n:].reshape(n, n).copy()
 
 
 def to_pose_with_covariance(
