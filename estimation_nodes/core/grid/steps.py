@@ -26,11 +26,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from functools import cache
 from types import ModuleType
 
 import numpy as np
 
+from estimation_nodes.core.compiled_loader import load_kernels
 from estimation_nodes.core.errors import ZeroEvidenceError
 from estimation_nodes.core.validation import FloatArray
 
@@ -161,15 +161,8 @@ def odometry_delta(previous: tuple[float, float, float],
     return rot1, trans, rot2
 
 
-@cache
 def _compiled_kernels() -> ModuleType | None:
-    """core/compiled_grid.py, compiled (or loaded from numba's cache); None without numba."""
-    try:
-        from estimation_nodes.core.grid import compiled as compiled_grid
-    except ImportError:
-        return None
-    compiled_grid.warm_up()
-    return compiled_grid
+    return load_kernels("estimation_nodes.core.grid.compiled")
 
 
 def compiled_kernels(states: int, allowed: bool = True) -> ModuleType | None:

@@ -16,12 +16,12 @@ Correction (Bayes' rule)::
 
 from __future__ import annotations
 
-import functools
 import math
 from types import ModuleType
 
 import numpy as np
 
+from estimation_nodes.core.compiled_loader import load_kernels
 from estimation_nodes.core.errors import ZeroEvidenceError
 from estimation_nodes.core.tiles.models import MotionKernel
 from estimation_nodes.core.validation import FloatArray
@@ -48,14 +48,8 @@ def one_hot(size: int, cell: int) -> FloatArray:
     return belief
 
 
-@functools.cache
 def _compiled_module() -> ModuleType | None:
-    try:
-        from estimation_nodes.core.tiles import compiled
-    except ImportError:   # numba missing or not matching this numpy: numpy path
-        return None
-    compiled.warm_up()
-    return compiled
+    return load_kernels("estimation_nodes.core.tiles.compiled")
 
 
 def compiled_kernels(size: int, allowed: bool = True) -> ModuleType | None:
