@@ -51,6 +51,7 @@ from timing import compare, format_seconds, table  # noqa: E402
 
 from estimation_nodes.params import topics  # noqa: E402
 from tests.foxglove_client import FoxgloveClient  # noqa: E402
+from tests.support import large_world_params  # noqa: E402
 
 SETTINGS = ("no live view", "live view, 0 clients", "1 reading client", "1 never-reading client")
 ARRAY = "std_msgs/msg/Float64MultiArray"
@@ -164,21 +165,6 @@ def latencies(mcap: Path) -> dict:
     return dict(graph=graph, monitor=monitor, steps=len(beliefs))
 
 
-def write_world(cells: int, directory: Path) -> Path:
-    rng = np.random.default_rng(cells)
-    world = directory / "world.txt"
-    world.write_text(" ".join(np.where(rng.random(cells) < 0.5, "dark", "bright")) + "\n")
-    model = (f"    world_file: {world}\n    classes: [bright, dark]\n"
-             f"    sensor_model: [0.8, 0.2, 0.4, 0.6]\n    motion_kernel: [0.1, 0.8, 0.1]\n")
-    params = directory / "large.yaml"
-    params.write_text(
-        "/**/motion_commander:\n  ros__parameters:\n    commands: [1]\n    repeat: true\n"
-        "    max_commands: 40\n    rate_hz: 4.0\n"
-        f"/**/tile_sensor:\n  ros__parameters:\n{model}    seed: 3\n"
-        f"/**/estimator:\n  ros__parameters:\n{model}")
-    return params
-
-
 def scenario_table(title: str, source: list[str], runs: int, env: dict, tmp: Path) -> None:
     results: dict[str, list[dict]] = {s: [] for s in SETTINGS}
     for _ in range(runs):
@@ -262,7 +248,8 @@ def main() -> None:
         scenario_table("localization (20 cells)", ["--scenario", "localization"],
                        args.runs, env, tmp)
         scenario_table(f"large world ({args.cells:,} cells)",
-                       ["--params-file", str(write_world(args.cells, tmp))], args.runs, env, tmp)
+                       ["--params-file", str(large_world_params(tmp, args.cells, 40))],
+                       args.runs, env, tmp)
     write_table()
 
 

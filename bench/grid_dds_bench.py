@@ -29,15 +29,9 @@ from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
 from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
+from tests.support import resident_mib  # noqa: E402
 
 MAP = BENCH.parent / "maps" / "office.yaml"
-
-
-def resident_mib(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 def main() -> None:

@@ -23,29 +23,16 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(1, str(Path(__file__).resolve().parents[1]))
 from dds_bench import start  # noqa: E402
 from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
 from estimation_nodes.tools.demo import graph_runtime  # noqa: E402
 from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
+from tests.support import resident_mib, write_world  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
-
-
-def resident_mib(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    raise RuntimeError(f"no VmRSS for {pid}")
-
-
-def write_world(cells: int, directory: Path) -> Path:
-    rng = np.random.default_rng(cells)
-    names = np.where(rng.random(cells) < 0.5, "dark", "bright")
-    path = directory / f"world_{cells}.txt"
-    path.write_text("\n".join(names.tolist()) + "\n", encoding="utf-8")
-    return path
 
 
 def main() -> None:

@@ -22,6 +22,7 @@ from estimation_nodes.params import topics
 from tests.conftest import SCENARIOS
 from tests.foxglove_client import FoxgloveClient
 from tests.graph.graph_tools import SETTLE, executable, node_command
+from tests.support import large_world_params
 
 #: Example 6.14 of the book, step 3 (../shared/reference/README.md).
 BOOK_FINAL_BELIEF = [0.048443, 0.063322, 0.244983, 0.528374, 0.114879]
@@ -139,22 +140,6 @@ def test_foxglove_view_serves_a_graph_it_did_not_start_and_stops_on_ctrl_c(ros_e
     output = view.communicate(timeout=30)[0]
     assert view.returncode == 0, output
     assert "Traceback" not in output
-
-
-def large_world_params(tmp_path: Path, cells: int, steps: int) -> Path:
-    """A seeded random world of ``cells`` dark and bright cells, ``steps`` moves."""
-    rng = np.random.default_rng(cells)
-    world = tmp_path / "world.txt"
-    world.write_text(" ".join(np.where(rng.random(cells) < 0.5, "dark", "bright")) + "\n")
-    model = (f"    world_file: {world}\n    classes: [bright, dark]\n"
-             f"    sensor_model: [0.8, 0.2, 0.4, 0.6]\n    motion_kernel: [0.1, 0.8, 0.1]\n")
-    params = tmp_path / "large.yaml"
-    params.write_text(
-        f"/**/motion_commander:\n  ros__parameters:\n    commands: [1]\n    repeat: true\n"
-        f"    max_commands: {steps}\n    rate_hz: 4.0\n"
-        f"/**/tile_sensor:\n  ros__parameters:\n{model}    seed: 3\n"
-        f"/**/estimator:\n  ros__parameters:\n{model}")
-    return params
 
 
 def unread_socket(url: str) -> socket.socket:

@@ -29,6 +29,7 @@ from estimation_nodes.tools.live_view.server import (
 )
 from estimation_nodes.tools.recording.mcap import schema_text
 from tests.foxglove_client import FoxgloveClient
+from tests.support import resident_mib
 
 REPO = Path(__file__).resolve().parents[2]
 ARRAY = "std_msgs/msg/Float64MultiArray"
@@ -120,13 +121,6 @@ def test_a_client_gets_the_cdr_bytes_with_their_ros2msg_schema():
     decoded = client.decoder("/robot1/belief")(received.payload)
     assert list(decoded.data) == [0.25, 0.25, 0.125, 0.125, 0.25]
     assert decoded.layout.dim[0].label == "cells"
-
-
-def resident_mib() -> float:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    raise RuntimeError("no VmRSS")
 
 
 @pytest.mark.timeout(120)
