@@ -315,6 +315,52 @@ PLANAR_ROBOT_SPECS = GRID_MODEL_SPECS + (
               read_only=True, min_value=0.0, max_value=1e6),
 )
 
+#: The landmark filter (ekf_localizer): the unicycle's odometry noise, the camera's
+#: range-bearing noise and mounting, the gate and its recovery, the UKF's sigma points.
+LANDMARK_MODEL_SPECS = (
+    ParamSpec("filter", "ekf", "'ekf': the extended Kalman filter (models linearized at the "
+              "estimate); 'ukf': the unscented one (Van der Merwe's sigma points).",
+              read_only=True),
+    ParamSpec("noise.translation_per_m", 4e-4, "Variance (m^2) of the distance a step "
+              "travelled, per metre travelled.", min_value=0.0, max_value=100.0),
+    ParamSpec("noise.translation_per_rad", 3e-3, "Variance (m^2) of the distance a step "
+              "travelled, per radian turned.", min_value=0.0, max_value=100.0),
+    ParamSpec("noise.translation_per_s", 1e-6, "Variance (m^2) of the distance a step "
+              "travelled, per second (a robot standing still slips a little).",
+              min_value=0.0, max_value=100.0),
+    ParamSpec("noise.rotation_per_m", 1e-4, "Variance (rad^2) of the turn of a step, per "
+              "metre travelled.", min_value=0.0, max_value=100.0),
+    ParamSpec("noise.rotation_per_rad", 1.2e-2, "Variance (rad^2) of the turn of a step, per "
+              "radian turned.", min_value=0.0, max_value=100.0),
+    ParamSpec("noise.rotation_per_s", 1.2e-3, "Variance (rad^2) of the turn of a step, per "
+              "second.", min_value=0.0, max_value=100.0),
+    ParamSpec("range_std", 0.01, "Std (m) of a landmark's measured range, besides "
+              "range_std_per_m.", min_value=1e-6, max_value=100.0),
+    ParamSpec("range_std_per_m", 0.04, "Std of a measured range that grows with the range "
+              "(m per m): the std is range_std + range_std_per_m * range.", min_value=0.0,
+              max_value=10.0),
+    ParamSpec("bearing_std", 0.027, "Std (rad) of a landmark's measured bearing.",
+              min_value=1e-6, max_value=3.2),
+    ParamSpec("sensor_pose", [0.0, 0.0, 0.0], "[x, y, yaw] of the camera on the robot (m, m, "
+              "rad from the robot's heading)."),
+    ParamSpec("gate_probability", 0.999, "An observation whose innovation lies outside this "
+              "probability's Mahalanobis ellipse is counted and skipped (1: no gate).",
+              min_value=0.5, max_value=1.0),
+    ParamSpec("recovery_time", 5.0, "After this many seconds with every observation gated, "
+              "observations are taken ungated until one passes the gate again.",
+              min_value=0.01, max_value=3600.0),
+    ParamSpec("recovery_std", [1.0, 0.5], "[position (m), heading (rad)]: the least std the "
+              "covariance is widened to when a recovery starts (the filter no longer knows "
+              "where it is).", type_name="double_array"),
+    ParamSpec("ukf.alpha", 0.5, "The UKF's sigma-point spread (0 < alpha <= 1).",
+              read_only=True, min_value=1e-4, max_value=1.0),
+    ParamSpec("ukf.beta", 2.0, "The UKF's prior-knowledge weight (2: optimal for a Gaussian).",
+              read_only=True, min_value=0.0, max_value=10.0),
+    ParamSpec("ukf.kappa", 0.0, "The UKF's secondary scaling (0, or 3 - n).", read_only=True,
+              min_value=-2.9, max_value=100.0),
+)
+
+
 #: Each node's parameters, by node name.
 NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "estimator": ESTIMATOR_SPECS,
@@ -330,7 +376,8 @@ NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
 def spec_named(name: str, specs: tuple[ParamSpec, ...] | None = None) -> ParamSpec:
     """Parameter ``name``'s spec: from ``specs`` when given (a node's own, for a name two
     nodes use differently, such as rate_hz), else from whichever node declares it."""
-    for candidate in specs or (spec for table in NODE_SPECS.values() for spec in table):
+    tables = (*NODE_SPECS.values(), LANDMARK_MODEL_SPECS)
+    for candidate in specs or (spec for table in tables for spec in table):
         if candidate.name == name:
             return candidate
     raise KeyError(name)

@@ -1,0 +1,75 @@
+"""The extended Kalman filter for a unicycle among landmarks (Eqs. 6.35 and 6.36 with the
+models linearized at the estimate).
+
+Prediction: x' = move(x, u), P' = F P F' + G M G' (F, G the motion's Jacobians in the
+state and in the step's distance and turn, M their variances). Correction with one
+landmark's range and bearing z: y = z - h(x) (the bearing wrapped), S = H P H' + R,
+K = P H' S^-1, x' = x + K y, and the Joseph form P' = (I - K H) P (I - K H)' + K R K',
+which stays symmetric and positive semi-definite whatever the rounding.
+Every function returns new values and leaves its inputs alone.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from estimation_nodes.core.kalman import range_bearing, unicycle
+from estimation_nodes.core.kalman.range_bearing import SensorPose
+from estimation_nodes.core.kalman.unicycle import UnicycleNoise, wrap
+from estimation_nodes.core.validation import FloatArray
+
+IDENTITY = np.eye(3)
+
+
+class Innovation(NamedTuple):
+    """What a landmark observation says before it is applied: the residual ``y``, its
+    covariance ``S``, the cross covariance ``Pxz`` of state and measurement (P H' for the
+    EKF), and the Jacobian ``H`` where the filter linearizes (None for the UKF)."""
+
+    y: FloatArray
+    S: FloatArray
+    Pxz: FloatArray
+    H: FloatArray | None
+
+    @property
+    def nis(self) -> float:
+        """The normalized innovation squared y' S^-1 y (chi-square with 2 degrees of
+        freedom when the filter is consistent)."""
+        return float(self.y @ np.linalg.solve(self.S, self.y))
+
+
+def _symmetric(P: FloatArray) -> FloatArray:
+    return 0.5 * (P + P.T)
+
+
+def predict(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
+            noise: UnicycleNoise) -> tuple[FloatArray, FloatArray]:
+    """The pose and covariance after driving at (v, w) for dt seconds."""
+    v, w, dt = unicycle.check_motion(v, w, dt)
+    F, G = unicycle.jacobians(x, v, w, dt)
+    var_d, var_phi = noise.variances(v * dt, w * dt, dt)
+    P_next = F @ P @ F.T + (G * np.array([var_d, var_phi])) @ G.T
+    return unicycle.move(x, v, w, dt), _symmetric(P_next)
+
+
+def innovation(x: FloatArray, P: FloatArray, z: FloatArray, landmark: tuple[float, float],
+               sensor: SensorPose, R: FloatArray) -> Innovation:
+    """A range-bearing observation ``z`` of ``landmark``, linearized at x."""
+    H = range_bearing.jacobian(x, landmark, sensor)
+    PHt = P @ H.T
+    S = _symmetric(H @ PHt + R)
+    return Innovation(range_bearing.residual(z, range_bearing.expected(x, landmark, sensor)),
+                      S, PHt, H)
+
+
+def correct(x: FloatArray, P: FloatArray, observed: Innovation,
+            R: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The observation applied, with the Joseph form of the covariance update."""
+    assert observed.H is not None, "an EKF correction needs the EKF's innovation"
+    K = np.linalg.solve(observed.S, observed.Pxz.T).T
+    x_next = x + K @ observed.y
+    x_next[2] = wrap(x_next[2])
+    I_KH = IDENTITY - K @ observed.H
+    return x_next, _symmetric(I_KH @ P @ I_KH.T + K @ R @ K.T)

@@ -1,0 +1,261 @@
+"""Localization among known landmarks: the running EKF or UKF estimate and its event rules.
+
+Odometry is a twist (v, w) that drives the unicycle from its time until the next
+event; a camera frame is a set of range-bearing observations of landmarks by id,
+all taken at the frame's time. The filter predicts to each event's time with the
+twist in force, then applies the frame's observations one after the other.
+
+An observation of an id that is not on the map is counted and ignored. One whose
+normalized innovation squared exceeds the gate (the ``gate_probability``
+quantile of chi-square with 2 degrees of freedom) is counted and skipped: a
+wrong data association or a reflection must not pull the estimate. But a filter
+whose estimate went wrong rejects every true observation too, and would stay
+lost. So when no observation was accepted for ``recovery_time`` seconds while
+some were gated, the filter is *recovering*: its covariance is widened to at
+least ``recovery_std`` (it no longer knows where it is, and says so), and it
+takes every observation ungated (each pulls the estimate toward what the camera
+sees) until ``RECOVERED_AFTER`` in a row pass the gate on their own, which shows
+the estimate agrees with the landmarks again.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from estimation_nodes.core.kalman import ekf, ukf
+from estimation_nodes.core.kalman.ekf import Innovation
+from estimation_nodes.core.kalman.range_bearing import SensorPose
+from estimation_nodes.core.kalman.unicycle import UnicycleNoise
+from estimation_nodes.core.validation import FloatArray, as_finite_array, check_covariance
+
+FILTERS = ("ekf", "ukf")
+#: Consecutive observations within the gate that end a recovery (one may pass by chance).
+RECOVERED_AFTER = 3
+
+
+def chi_square_2_quantile(probability: float) -> float:
+    """The chi-square (2 degrees of freedom) quantile: exactly -2 ln(1 - p)."""
+    if probability >= 1.0:
+        return math.inf
+    return -2.0 * math.log1p(-probability)
+
+
+@dataclass(frozen=True)
+class LandmarkModel:
+    """Everything the landmark filter needs besides its state, validated on construction."""
+
+    kind: str
+    noise: UnicycleNoise
+    #: The range's std is range_std + range_std_per_m * range: a camera that measures
+    #: range by a landmark's apparent size errs in proportion to the range.
+    range_std: float
+    range_std_per_m: float
+    bearing_std: float
+    sensor: SensorPose
+    #: Landmark id -> (x, y) in the map frame.
+    landmarks: Mapping[int, tuple[float, float]]
+    gate_probability: float
+    recovery_time: float
+    #: The smallest std of x, y (m) and heading (rad) once recovering.
+    recovery_std: tuple[float, float]
+    #: The UKF's sigma points; None for the EKF.
+    points: ukf.SigmaPoints | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in FILTERS:
+            raise ValueError(f"filter: expected one of {FILTERS}, got {self.kind!r}")
+        if self.kind == "ukf" and self.points is None:
+            raise ValueError("points: the UKF needs its sigma points")
+        for name in ("range_std", "bearing_std"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"{name}: expected a finite number > 0, got {value!r}")
+        if not (math.isfinite(self.range_std_per_m) and self.range_std_per_m >= 0):
+            raise ValueError(f"range_std_per_m: expected a finite number >= 0, got "
+                             f"{self.range_std_per_m!r}")
+        if not 0 < self.gate_probability <= 1:
+            raise ValueError(f"gate_probability: expected 0 < p <= 1, got "
+                             f"{self.gate_probability!r}")
+        if not (math.isfinite(self.recovery_time) and self.recovery_time > 0):
+            raise ValueError(f"recovery_time: expected a finite number > 0, got "
+                             f"{self.recovery_time!r}")
+        if not all(math.isfinite(v) and v > 0 for v in self.recovery_std) \
+                or len(self.recovery_std) != 2:
+            raise ValueError(f"recovery_std: expected [position m, heading rad] > 0, got "
+                             f"{list(self.recovery_std)}")
+        for key, (lx, ly) in self.landmarks.items():
+            if not (math.isfinite(lx) and math.isfinite(ly)):
+                raise ValueError(f"landmarks: landmark {key} at ({lx}, {ly}) is not finite")
+
+    def R(self, measured_range: float) -> FloatArray:
+        """The measurement noise of an observation at ``measured_range``."""
+        range_std = self.range_std + self.range_std_per_m * measured_range
+        return np.diag([range_std ** 2, self.bearing_std ** 2])
+
+    @property
+    def gate(self) -> float:
+        return chi_square_2_quantile(self.gate_probability)
+
+
+@dataclass(frozen=True)
+class Observation:
+    """One landmark seen in a frame: its id, range (m) and bearing (rad)."""
+
+    landmark: int
+    range: float
+    bearing: float
+
+
+@dataclass
+class Outcome:
+    """What became of one observation: 'used', 'gated', 'unknown', 'invalid' (not finite,
+    or no bearing), or 'unstable' (its correction would have left no valid covariance);
+    its NIS where it was computed."""
+
+    observation: Observation
+    verdict: str
+    nis: float = math.nan
+
+
+class LandmarkLocalization:
+    """The pose (x, y, heading) and its covariance, advanced by odometry and landmarks."""
+
+    def __init__(self, model: LandmarkModel, x0: object, P0: object, t0: float) -> None:
+        self.model = model
+        self._gate = model.gate
+        self.x = as_finite_array("initial_pose", x0, ndim=1)
+        if self.x.size != 3:
+            raise ValueError(f"initial_pose: expected [x, y, yaw], got {self.x.tolist()}")
+        self.P = check_covariance("initial_covariance", P0, 3)
+        self.t = float(t0)
+        self.twist = (0.0, 0.0)
+        self.counts: Counter[str] = Counter()
+        self.recovering = False
+        self._last_used = float(t0)
+        self._gated_since_used = 0
+        self._passed_in_a_row = 0
+
+    # --- state, as causal_order.py saves and restores it ---------------------------------
+
+    def snapshot(self) -> tuple:
+        return (self.x, self.P, self.t, self.twist, self.counts.copy(), self.recovering,
+                self._last_used, self._gated_since_used, self._passed_in_a_row)
+
+    def restore(self, state: tuple) -> None:
+        (self.x, self.P, self.t, self.twist, counts, self.recovering, self._last_used,
+         self._gated_since_used, self._passed_in_a_row) = state
+        self.counts = counts.copy()
+
+    # --- events --------------------------------------------------------------------------
+
+    def on_odometry(self, t: float, v: float, w: float) -> None:
+        """The twist in force from ``t`` on; the pose predicted to ``t`` with the last one."""
+        if not (math.isfinite(v) and math.isfinite(w)):
+            raise ValueError(f"odometry: expected finite speeds, got v={v!r}, w={w!r}")
+        self._predict_to(t)
+        self.twist = (float(v), float(w))
+
+    def on_frame(self, t: float, observations: Iterable[Observation]) -> list[Outcome]:
+        """A camera frame at ``t``: predict to it, then apply each observation."""
+        self._predict_to(t)
+        return [self._observe(observation) for observation in observations]
+
+    def _predict_to(self, t: float) -> None:
+        if not math.isfinite(t):
+            raise ValueError(f"t: expected a finite time, got {t!r}")
+        dt = t - self.t
+        if dt <= 0:
+            # A late event is applied at the filter's time (causal_order.py puts them
+            # in order first; what it cannot is counted).
+            if dt < 0:
+                self.counts["late"] += 1
+            return
+        v, w = self.twist
+        model = self.model
+        if model.kind == "ekf":
+            self.x, self.P = ekf.predict(self.x, self.P, v, w, dt, model.noise)
+        else:
+            assert model.points is not None
+            self.x, self.P = ukf.predict(self.x, self.P, v, w, dt, model.noise, model.points)
+        self.t = t
+
+    def _innovation(self, z: FloatArray, landmark: tuple[float, float]) -> Innovation:
+        model = self.model
+        R = model.R(float(z[0]))
+        if model.kind == "ekf":
+            return ekf.innovation(self.x, self.P, z, landmark, model.sensor, R)
+        assert model.points is not None
+        return ukf.innovation(self.x, self.P, z, landmark, model.sensor, R, model.points)
+
+    def _observe(self, observation: Observation) -> Outcome:
+        landmark = self.model.landmarks.get(observation.landmark)
+        if landmark is None:
+            self.counts["unknown"] += 1
+            return Outcome(observation, "unknown")
+        z = np.array([observation.range, observation.bearing], dtype=np.float64)
+        if not (np.isfinite(z).all() and z[0] > 0):
+            self.counts["invalid"] += 1
+            return Outcome(observation, "invalid")
+        try:
+            observed = self._innovation(z, landmark)
+            nis = observed.nis
+        except (ValueError, np.linalg.LinAlgError):
+            self.counts["invalid"] += 1
+            return Outcome(observation, "invalid")
+        passes = nis <= self._gate
+        if not passes and not self.recovering:
+            if not self._lost():
+                self.counts["gated"] += 1
+                self._gated_since_used += 1
+                return Outcome(observation, "gated", nis)
+            self._start_recovery()
+            observed = self._innovation(z, landmark)      # from the widened covariance
+        elif self.recovering:
+            self._passed_in_a_row = self._passed_in_a_row + 1 if passes else 0
+            if self._passed_in_a_row >= RECOVERED_AFTER:
+                self.recovering = False
+                self.counts["recovered"] += 1
+        if not self._apply(observed, z):
+            self.counts["unstable"] += 1
+            return Outcome(observation, "unstable", nis)
+        self.counts["used"] += 1
+        self._last_used, self._gated_since_used = self.t, 0
+        return Outcome(observation, "used", nis)
+
+    def _lost(self) -> bool:
+        """Whether every observation was gated for recovery_time seconds."""
+        return bool(self._gated_since_used) \
+            and self.t - self._last_used >= self.model.recovery_time
+
+    def _start_recovery(self) -> None:
+        self.recovering = True
+        self._passed_in_a_row = 0
+        self.counts["recoveries"] += 1
+        self._widen()
+
+    def _widen(self) -> None:
+        """The covariance grown to at least recovery_std in position and heading."""
+        position, heading = self.model.recovery_std
+        floor = np.array([position, position, heading]) ** 2
+        self.P = self.P + np.diag(np.maximum(floor - np.diag(self.P), 0.0))
+
+    def _apply(self, observed: Innovation, z: FloatArray) -> bool:
+        """The correction applied where it leaves a finite estimate with a positive definite
+        covariance (the UKF's P - K S K' need not, after a large innovation)."""
+        if self.model.kind == "ekf":
+            x, P = ekf.correct(self.x, self.P, observed, self.model.R(float(z[0])))
+        else:
+            x, P = ukf.correct(self.x, self.P, observed)
+        if not (np.isfinite(x).all() and np.isfinite(P).all()):
+            return False
+        try:
+            np.linalg.cholesky(P)
+        except np.linalg.LinAlgError:
+            return False
+        self.x, self.P = x, P
+        return True
