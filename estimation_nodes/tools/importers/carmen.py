@@ -1,0 +1,154 @@
+"""CARMEN laser logs (plain or gzipped), as the Radish / Freiburg SLAM benchmark keeps them.
+
+``FLASER n r1 .. rn x y theta odom_x odom_y odom_theta t host t_logger``: a scan of n
+ranges, beam i at ``-pi/2 + i pi / n`` in the robot frame, with the pose at that scan
+(in a "corrected" log, the SLAM-corrected pose: the truth a localizer is scored
+against). ``ODOM x y theta tv rv accel t host t_logger``: odometry. In a corrected log
+the odometry restarts at each scan's corrected pose (a line with t = 0 right after
+the FLASER), so the raw wheel odometry, with its real drift, is rebuilt here by
+chaining each scan-to-scan step: (pose[k-1])^-1 (+) (the last ODOM before scan k).
+"""
+
+from __future__ import annotations
+
+import gzip
+import math
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+Pose = tuple[float, float, float]
+
+
+class LogError(Exception):
+    """A log that cannot be read at all: the message says why in one line."""
+
+
+@dataclass(frozen=True)
+class Scan:
+    t: float
+    ranges: np.ndarray
+    #: The pose the log gives with the scan (the SLAM-corrected one in a corrected log).
+    pose: Pose
+
+
+@dataclass(frozen=True)
+class OdometrySample:
+    t: float
+    #: The raw odometry pose, chained from the log's start.
+    pose: Pose
+    tv: float
+    rv: float
+
+
+@dataclass
+class CarmenLog:
+    scans: list[Scan]
+    odometry: list[OdometrySample]
+    #: Lines left out by kind ("malformed FLASER", ...), and other notes with counts.
+    left_out: Counter[str] = field(default_factory=Counter)
+    #: Odometry times raised to the previous one, so that time never runs back.
+    times_raised: int = 0
+
+    @property
+    def max_reading(self) -> float:
+        return max(float(scan.ranges.max()) for scan in self.scans)
+
+
+def compose(a: Pose, b: Pose) -> Pose:
+    """a (+) b: pose b, given in a's frame, in a's parent frame."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], _wrap(a[2] + b[2]))
+
+
+def relative(a: Pose, b: Pose) -> Pose:
+    """a^-1 (+) b: pose b in a's frame."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return (c * dx + s * dy, -s * dx + c * dy, _wrap(b[2] - a[2]))
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
+
+
+def _lines(path: Path) -> list[str]:
+    try:
+        raw = path.read_bytes()
+        text = gzip.decompress(raw) if raw[:2] == b"\x1f\x8b" else raw
+        return text.decode("ascii").splitlines()
+    except FileNotFoundError:
+        raise LogError(f"{path}: no such file") from None
+    except (OSError, EOFError, gzip.BadGzipFile, UnicodeDecodeError) as error:
+        raise LogError(f"{path}: cannot be read: {error}") from None
+
+
+def _numbers(tokens: list[str]) -> list[float] | None:
+    try:
+        values = [float(v) for v in tokens]
+    except ValueError:
+        return None
+    return values if all(math.isfinite(v) for v in values) else None
+
+
+def _flaser(tokens: list[str]) -> Scan | None:
+    if len(tokens) < 2 or not tokens[1].isdigit():
+        return None
+    n = int(tokens[1])
+    values = _numbers(tokens[2:2 + n + 7])
+    if n == 0 or values is None or len(values) != n + 7 or any(r < 0 for r in values[:n]):
+        return None
+    x, y, theta = values[n:n + 3]
+    return Scan(values[n + 6], np.array(values[:n], dtype=np.float32), (x, y, theta))
+
+
+def _odom(tokens: list[str]) -> tuple[Pose, float, float, float] | None:
+    values = _numbers(tokens[1:8])
+    if values is None or len(values) != 7:
+        return None
+    x, y, theta, tv, rv, _accel, t = values
+    return (x, y, theta), tv, rv, t
+
+
+def read_log(path: Path) -> CarmenLog:
+    """A CARMEN log's scans and its raw odometry; malformed lines are counted in
+    ``left_out``, never silently dropped."""
+    log = CarmenLog([], [])
+    raw_at_scan: Pose | None = None      # the raw odometry at the last scan
+    restart: Pose | None = None          # the pose the log's odometry restarted at
+    last_raw: Pose = (0.0, 0.0, 0.0)
+    last_t = -math.inf
+    for line in _lines(Path(path)):
+        tokens = line.split()
+        if not tokens or tokens[0].startswith("#") or tokens[0] in ("PARAM", "NEFF", "SYNC"):
+            continue
+        if tokens[0] == "FLASER":
+            scan = _flaser(tokens)
+            if scan is None:
+                log.left_out["malformed FLASER lines"] += 1
+                continue
+            log.scans.append(scan)
+            raw_at_scan, restart = last_raw, scan.pose
+        elif tokens[0] == "ODOM":
+            parsed = _odom(tokens)
+            if parsed is None:
+                log.left_out["malformed ODOM lines"] += 1
+                continue
+            pose, tv, rv, t = parsed
+            if restart is not None and raw_at_scan is not None:
+                # A corrected log's odometry since the last scan, from that scan's pose.
+                pose = compose(raw_at_scan, relative(restart, pose))
+            if t == 0 and log.scans:
+                t = log.scans[-1].t          # the restart line belongs to its scan
+            if t < last_t:
+                t = last_t
+                log.times_raised += 1
+            last_t, last_raw = t, pose
+            log.odometry.append(OdometrySample(t, pose, tv, rv))
+        else:
+            log.left_out[f"{tokens[0]} lines (not used)"] += 1
+    if not log.scans:
+        raise LogError(f"{path}: no FLASER line: not a CARMEN laser log")
+    return log

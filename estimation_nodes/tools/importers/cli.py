@@ -1,0 +1,222 @@
+"""estimation_import: a real robot's log as a ROS 2 recording (MCAP), in the layout --record
+writes, so that estimation_play, estimation_replay, ros2 bag and Foxglove read it.
+
+    estimation_import carmen LOG -o run.mcap [--range-max M]
+    estimation_import utias DATASET_DIR --robot N -o run.mcap [--landmarks-file FILE]
+
+CARMEN: /scan (sensor_msgs/LaserScan with the log's angles and range_max, frame
+``laser``), /odom (nav_msgs/Odometry at every odometry line: the raw odometry pose
+and twist, ``odom`` -> ``base_link``), /ground_truth (geometry_msgs/PoseStamped in
+``map``: the log's corrected pose at each scan). UTIAS: /odom (the twist, and the
+pose it dead-reckons), /landmark_observations (sensor_msgs/PointCloud2, one per
+camera frame: x = range cos(bearing), y = range sin(bearing), z = 0, id = the
+landmark's subject number), /ground_truth (Vicon), and a landmarks file (YAML).
+Every message is stamped with the log's time. What was left out is counted and
+reported; a log that cannot be read is one line and exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections import Counter
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from estimation_nodes.tools.importers import carmen, utias
+from estimation_nodes.tools.recording.mcap import McapRunWriter, RecordingError
+
+LASER_SCAN = "sensor_msgs/msg/LaserScan"
+ODOMETRY = "nav_msgs/msg/Odometry"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+POINT_CLOUD = "sensor_msgs/msg/PointCloud2"
+
+
+def _ns(t: float) -> int:
+    return int(round(t * 1e9))
+
+
+def _stamp(header, t: float, frame_id: str) -> None:
+    ns = _ns(t)
+    header.stamp.sec, header.stamp.nanosec = divmod(ns, 1_000_000_000)
+    header.frame_id = frame_id
+
+
+def _fill_pose(pose, x: float, y: float, yaw: float) -> None:
+    pose.position.x, pose.position.y = float(x), float(y)
+    pose.orientation.z, pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+
+
+class _Writer:
+    """Messages to MCAP in time order, counted by topic."""
+
+    def __init__(self, path: Path, topics: dict[str, str], source: str) -> None:
+        self._file = McapRunWriter(path, topics, {"source": source,
+                                                  "importer": "estimation_import"})
+        self._pending: list[tuple[int, int, str, bytes]] = []
+        self.counts: Counter[str] = Counter()
+
+    def add(self, topic: str, t: float, msg) -> None:
+        from rclpy.serialization import serialize_message
+
+        self._pending.append((_ns(t), len(self._pending), topic, serialize_message(msg)))
+        self.counts[topic] += 1
+
+    def close(self) -> None:
+        for ns, _, topic, data in sorted(self._pending):
+            self._file.write(topic, data, ns, ns)
+        self._file.close()
+
+
+def import_carmen(log_path: Path, out: Path, range_max: float | None) -> list[str]:
+    from geometry_msgs.msg import PoseStamped
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import LaserScan
+
+    log = carmen.read_log(log_path)
+    limit = log.max_reading if range_max is None else range_max
+    writer = _Writer(out, {"/scan": LASER_SCAN, "/odom": ODOMETRY,
+                           "/ground_truth": POSE_STAMPED}, str(log_path))
+    for scan in log.scans:
+        n = scan.ranges.size
+        msg = LaserScan()
+        _stamp(msg.header, scan.t, "laser")
+        msg.angle_min, msg.angle_increment = -math.pi / 2, math.pi / n
+        msg.angle_max = msg.angle_min + (n - 1) * msg.angle_increment
+        msg.range_min, msg.range_max = 0.0, float(limit)
+        msg.ranges = scan.ranges.tolist()
+        writer.add("/scan", scan.t, msg)
+        truth = PoseStamped()
+        _stamp(truth.header, scan.t, "map")
+        _fill_pose(truth.pose, *scan.pose)
+        writer.add("/ground_truth", scan.t, truth)
+    for sample in log.odometry:
+        odom = Odometry()
+        _stamp(odom.header, sample.t, "odom")
+        odom.child_frame_id = "base_link"
+        _fill_pose(odom.pose.pose, *sample.pose)
+        odom.twist.twist.linear.x, odom.twist.twist.angular.z = sample.tv, sample.rv
+        writer.add("/odom", sample.t, odom)
+    writer.close()
+    origin = "given" if range_max is not None else "the log's largest reading"
+    notes = [f"range_max {limit:g} m ({origin})"]
+    if log.times_raised:
+        notes.append(f"{log.times_raised} odometry times raised to the one before "
+                     f"(the log's time ran back)")
+    return _report(writer.counts, log.left_out, notes)
+
+
+def import_utias(directory: Path, robot: int, out: Path,
+                 landmarks_file: Path | None) -> list[str]:
+    from geometry_msgs.msg import PoseStamped
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import PointCloud2, PointField
+
+    run = utias.read_run(directory, robot)
+    writer = _Writer(out, {"/odom": ODOMETRY, "/landmark_observations": POINT_CLOUD,
+                           "/ground_truth": POSE_STAMPED}, f"{directory} robot {robot}")
+    pose = tuple(run.truth[0, 1:])
+    previous_t, twist = run.odometry[0, 0], (0.0, 0.0)
+    for t, v, w in run.odometry:
+        pose = _dead_reckoned(pose, twist, t - previous_t)
+        previous_t, twist = t, (v, w)
+        odom = Odometry()
+        _stamp(odom.header, t, "odom")
+        odom.child_frame_id = "base_link"
+        _fill_pose(odom.pose.pose, *pose)
+        odom.twist.twist.linear.x, odom.twist.twist.angular.z = float(v), float(w)
+        writer.add("/odom", t, odom)
+    fields = [PointField(name=name, offset=4 * i, datatype=datatype, count=1)
+              for i, (name, datatype) in enumerate((("x", PointField.FLOAT32),
+                                                     ("y", PointField.FLOAT32),
+                                                     ("z", PointField.FLOAT32),
+                                                     ("id", PointField.UINT32)))]
+    for t, rows in run.frames():
+        cloud = PointCloud2()
+        _stamp(cloud.header, t, "camera")
+        cloud.height, cloud.width = 1, len(rows)
+        cloud.fields, cloud.is_bigendian, cloud.point_step = fields, False, 16
+        cloud.row_step, cloud.is_dense = 16 * len(rows), True
+        points = np.zeros(len(rows), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
+                                            ("id", "<u4")])
+        points["x"] = rows[:, 2] * np.cos(rows[:, 3])
+        points["y"] = rows[:, 2] * np.sin(rows[:, 3])
+        points["id"] = rows[:, 1].astype(np.uint32)
+        cloud.data = points.tobytes()
+        writer.add("/landmark_observations", t, cloud)
+    for t, x, y, theta in run.truth:
+        truth = PoseStamped()
+        _stamp(truth.header, t, "map")
+        _fill_pose(truth.pose, x, y, theta)
+        writer.add("/ground_truth", t, truth)
+    writer.close()
+    target = landmarks_file or out.with_suffix(".landmarks.yaml")
+    _write_landmarks(target, run.landmarks, directory)
+    return _report(writer.counts, run.left_out, [f"landmarks written to {target}"])
+
+
+def _dead_reckoned(pose, twist, dt: float):
+    from estimation_nodes.core.kalman.unicycle import move
+
+    return tuple(move(np.array(pose), twist[0], twist[1], max(dt, 0.0)).tolist())
+
+
+def _write_landmarks(path: Path, landmarks: dict[int, tuple[float, float]],
+                     source: Path) -> None:
+    lines = [f"# Landmarks of {source} (subject number, x and y in m, map frame)",
+             "landmarks:"]
+    lines += [f"  - {{id: {key}, x: {x!r}, y: {y!r}}}" for key, (x, y) in
+              sorted(landmarks.items())]
+    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+
+
+def _report(counts: Counter[str], left_out: Counter[str], notes: list[str]) -> list[str]:
+    lines = [f"{topic}: {count} messages" for topic, count in sorted(counts.items())]
+    lines += [f"left out: {count} {what}" for what, count in sorted(left_out.items())
+              if count]
+    return lines + notes
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="estimation_import",
+                                     description=__doc__.split("\n")[0])
+    kinds = parser.add_subparsers(dest="kind", required=True)
+    c = kinds.add_parser("carmen", help="a CARMEN laser log (plain or .gz)")
+    c.add_argument("log", type=Path)
+    c.add_argument("--range-max", type=float,
+                   help="readings at or above this are no return (default: the log's "
+                        "largest reading)")
+    u = kinds.add_parser("utias", help="one robot of a UTIAS MRCLAM dataset folder")
+    u.add_argument("dataset", type=Path)
+    u.add_argument("--robot", type=int, required=True)
+    u.add_argument("--landmarks-file", type=Path,
+                   help="where to write the landmarks (default: OUT.landmarks.yaml)")
+    for sub in (c, u):
+        sub.add_argument("-o", "--output", type=Path, required=True, metavar="FILE.mcap")
+    args = parser.parse_args(argv)
+    if args.kind == "carmen" and args.range_max is not None \
+            and not (math.isfinite(args.range_max) and args.range_max > 0):
+        parser.error("--range-max must be a finite number > 0")
+    return args
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    args = parse_args(argv)
+    try:
+        if args.kind == "carmen":
+            lines = import_carmen(args.log, args.output, args.range_max)
+        else:
+            lines = import_utias(args.dataset, args.robot, args.output, args.landmarks_file)
+    except (carmen.LogError, utias.DatasetError, RecordingError) as error:
+        print(f"estimation_import: {error}", file=sys.stderr)
+        sys.exit(2)
+    for line in lines:
+        print(f"estimation_import: {line}")
+    print(f"estimation_import: wrote {args.output}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,200 @@
+"""estimation_import: CARMEN logs and the UTIAS dataset read as published, and written as
+MCAP recordings that decode to the log's values; bad input counted or refused in one line."""
+
+from __future__ import annotations
+
+import gzip
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from estimation_nodes.tools.importers import carmen, cli, utias
+
+SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
+
+
+def decoded(path: Path) -> dict[str, list]:
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    topics: dict[str, list] = {}
+    with path.open("rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        for _schema, channel, message, msg in reader.iter_decoded_messages(log_time_order=True):
+            topics.setdefault(channel.topic, []).append((message.log_time, msg))
+    return topics
+
+
+def stamp(msg) -> float:
+    return msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+
+
+# --- CARMEN ------------------------------------------------------------------------------
+
+#: The raw odometry a robot measured (x, y, theta) at 0, 1, 2, 3 s, and the corrected
+#: poses of its scans at 1 s and 3 s: the corrected log restarts the odometry at each.
+RAW = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.1), (2.0, 0.2, 0.3), (2.5, 1.0, 0.8)]
+CORRECTED = {1.0: (1.1, 0.05, 0.12), 3.0: (2.7, 1.2, 0.85)}
+
+
+def corrected_log() -> str:
+    """A corrected CARMEN log of RAW and CORRECTED, as a SLAM run writes one."""
+    lines = ["# message formats defined: PARAM SYNC ODOM FLASER", "PARAM robot_x 0 nohost 0"]
+    restart_raw, restart_pose = None, None
+    for t, raw in zip((0.0, 1.0, 2.0, 3.0), RAW):
+        pose = raw if restart_raw is None else carmen.compose(
+            restart_pose, carmen.relative(restart_raw, raw))
+        lines.append(f"ODOM {pose[0]!r} {pose[1]!r} {pose[2]!r} 0.5 0.1 0 {t + 0.01} h {t}")
+        if t in CORRECTED:
+            x, y, th = CORRECTED[t]
+            ranges = " ".join(["1.5", "2.0", "81.83", "0.7"])
+            lines.append(f"FLASER 4 {ranges} {x} {y} {th} {x} {y} {th} {t + 0.02} h {t}")
+            lines.append(f"ODOM {x} {y} {th} 0 0 0 0 h 0")
+            lines.append("NEFF 12.5")
+            restart_raw, restart_pose = raw, (x, y, th)
+    return "\n".join(lines) + "\n"
+
+
+def test_the_raw_odometry_is_rebuilt_from_a_corrected_log(tmp_path):
+    path = tmp_path / "run.log"
+    path.write_text(corrected_log())
+    log = carmen.read_log(path)
+    assert [s.t for s in log.scans] == [1.02, 3.02]
+    assert [s.pose for s in log.scans] == [CORRECTED[1.0], CORRECTED[3.0]]
+    np.testing.assert_allclose(log.scans[0].ranges, [1.5, 2.0, 81.83, 0.7], rtol=1e-6)
+    rebuilt = [o.pose for o in log.odometry if o.t in (0.01, 1.01, 2.01, 3.01)]
+    np.testing.assert_allclose(rebuilt, RAW, atol=1e-12)
+    # the restart lines (t = 0) take their scan's time and its raw odometry
+    restarts = [o for o in log.odometry if o.t in (1.02, 3.02)]
+    np.testing.assert_allclose([o.pose for o in restarts], [RAW[1], RAW[3]], atol=1e-12)
+    assert log.left_out == {}
+
+
+def test_malformed_lines_are_counted_and_a_time_running_back_is_raised(tmp_path):
+    text = corrected_log().replace("NEFF 12.5\n", "NEFF 12.5\nFLASER 3 1 2\nODOM 1 x 2\n", 1)
+    text += "ODOM 0 0 0 0 0 0 2.5 h 2.5\nRLASER 1 1\n"
+    path = tmp_path / "run.log.gz"
+    path.write_bytes(gzip.compress(text.encode()))
+    log = carmen.read_log(path)
+    assert log.left_out == {"malformed FLASER lines": 1, "malformed ODOM lines": 1,
+                            "RLASER lines (not used)": 1}
+    assert log.times_raised == 1 and log.odometry[-1].t == pytest.approx(3.02)
+    assert [o.t for o in log.odometry] == sorted(o.t for o in log.odometry)
+
+
+def test_a_carmen_log_becomes_a_recording_of_scans_odometry_and_truth(tmp_path, capsys):
+    log_path = tmp_path / "run.log"
+    log_path.write_text(corrected_log())
+    out = tmp_path / "run.mcap"
+    cli.main(["carmen", str(log_path), "-o", str(out)])
+    assert "range_max 81.83 m" in capsys.readouterr().out
+    topics = decoded(out)
+    assert {t: len(m) for t, m in topics.items()} == {"/scan": 2, "/ground_truth": 2,
+                                                      "/odom": 6}
+    scan = topics["/scan"][0][1]
+    assert scan.angle_min == pytest.approx(-math.pi / 2)
+    assert scan.angle_increment == pytest.approx(math.pi / 4)
+    assert scan.range_max == pytest.approx(81.83) and scan.header.frame_id == "laser"
+    assert stamp(scan) == pytest.approx(1.02)
+    truth = topics["/ground_truth"][1][1]
+    assert truth.header.frame_id == "map" and truth.pose.position.x == pytest.approx(2.7)
+    assert 2 * math.atan2(truth.pose.orientation.z, truth.pose.orientation.w) \
+        == pytest.approx(0.85)
+    odom = [m for _, m in topics["/odom"]]
+    assert odom[0].header.frame_id == "odom" and odom[0].child_frame_id == "base_link"
+    assert [stamp(m) for m in odom] == sorted(stamp(m) for m in odom)
+    assert odom[-1].pose.pose.position.x == pytest.approx(RAW[3][0])
+    assert odom[0].twist.twist.linear.x == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("content", [None, b"not a log\n", b"\x1f\x8b broken gzip"])
+def test_a_log_that_cannot_be_read_is_one_line_and_exit_2(tmp_path, capsys, content):
+    path = tmp_path / "run.log"
+    if content is not None:
+        path.write_bytes(content)
+    with pytest.raises(SystemExit) as ended:
+        cli.main(["carmen", str(path), "-o", str(tmp_path / "run.mcap")])
+    assert ended.value.code == 2
+    err = capsys.readouterr().err
+    assert err.startswith("estimation_import: ") and err.count("\n") == 1
+
+
+@pytest.mark.skipif(not (SHARED / "carmen").is_dir(), reason=f"no CARMEN logs at {SHARED}")
+def test_the_intel_log_keeps_its_real_drift():
+    log = carmen.read_log(SHARED / "carmen" / "intel-corrected.log.gz")
+    assert len(log.scans) == 910 and log.left_out == {}
+    times = np.array([o.t for o in log.odometry])
+
+    def raw_at(t):
+        return log.odometry[np.searchsorted(times, t, "right") - 1].pose
+
+    first, last = log.scans[0], log.scans[-1]
+    dead_reckoned = carmen.compose(first.pose, carmen.relative(raw_at(first.t),
+                                                               raw_at(last.t)))
+    drift = math.hypot(dead_reckoned[0] - last.pose[0], dead_reckoned[1] - last.pose[1])
+    assert 50 < drift < 75      # the data's README: 62 m of drift by the end
+
+
+# --- UTIAS -------------------------------------------------------------------------------
+
+HEADER = "# UTIAS\n# by\n# format\n# columns\n"
+
+
+def utias_folder(tmp_path: Path) -> Path:
+    folder = tmp_path / "dataset"
+    folder.mkdir()
+    (folder / "Barcodes.dat").write_text(HEADER + "1 5\n2 14\n6 27\n7 54\n")
+    (folder / "Landmark_Groundtruth.dat").write_text(
+        HEADER + "6 1.0 2.0 0.001 0.001\n7 -1.0 0.5 0.001 0.001\n")
+    (folder / "Robot1_Odometry.dat.gz").write_bytes(gzip.compress(
+        (HEADER + "10.0 0.1 0.0\n10.5 0.1 0.2\nbad line\n11.0 0.0 0.0\n").encode()))
+    (folder / "Robot1_Measurement.dat").write_text(
+        HEADER + "10.2 27 2.0 0.1\n10.2 54 3.0 -0.2\n10.2 14 1.0 0.0\n10.7 99 1.0 0.0\n"
+                 "10.7 27 1.9 0.12\n")
+    (folder / "Robot1_Groundtruth.dat").write_text(
+        HEADER + "9.9 0.0 0.0 0.0\n10.4 0.05 0.0 0.0\n11.0 0.1 0.0 0.1\n")
+    return folder
+
+
+def test_a_utias_run_keeps_landmarks_only_and_counts_the_rest(tmp_path):
+    run = utias.read_run(utias_folder(tmp_path), 1)
+    assert run.landmarks == {6: (1.0, 2.0), 7: (-1.0, 0.5)}
+    assert run.detections[:, 1].tolist() == [6, 7, 6]
+    assert run.left_out == {"detections of robots": 1, "detections of unknown barcodes": 1,
+                            "malformed lines in Robot1_Odometry": 1}
+    assert [(t, len(rows)) for t, rows in run.frames()] == [(10.2, 2), (10.7, 1)]
+
+
+def test_a_utias_run_becomes_odometry_landmark_clouds_and_truth(tmp_path, capsys):
+    out = tmp_path / "run.mcap"
+    cli.main(["utias", str(utias_folder(tmp_path)), "--robot", "1", "-o", str(out)])
+    printed = capsys.readouterr().out
+    assert "left out: 1 detections of robots" in printed
+    topics = decoded(out)
+    assert {t: len(m) for t, m in topics.items()} == {
+        "/odom": 3, "/landmark_observations": 2, "/ground_truth": 3}
+    cloud = topics["/landmark_observations"][0][1]
+    assert stamp(cloud) == pytest.approx(10.2) and cloud.width == 2
+    assert [f.name for f in cloud.fields] == ["x", "y", "z", "id"]
+    points = np.frombuffer(bytes(cloud.data), dtype=[("x", "<f4"), ("y", "<f4"),
+                                                     ("z", "<f4"), ("id", "<u4")])
+    np.testing.assert_allclose(points["x"], [2.0 * math.cos(0.1), 3.0 * math.cos(-0.2)],
+                               rtol=1e-6)
+    np.testing.assert_allclose(points["y"], [2.0 * math.sin(0.1), 3.0 * math.sin(-0.2)],
+                               rtol=1e-6)
+    assert points["id"].tolist() == [6, 7]
+    odom = topics["/odom"][1][1]
+    assert odom.twist.twist.angular.z == pytest.approx(0.2)
+    assert odom.pose.pose.position.x == pytest.approx(0.05)      # 0.5 s at 0.1 m/s
+    landmarks = (tmp_path / "run.landmarks.yaml").read_text()
+    assert "{id: 6, x: 1.0, y: 2.0}" in landmarks
+
+
+def test_a_missing_robot_file_is_one_line_and_exit_2(tmp_path, capsys):
+    with pytest.raises(SystemExit) as ended:
+        cli.main(["utias", str(utias_folder(tmp_path)), "--robot", "2", "-o",
+                  str(tmp_path / "run.mcap")])
+    assert ended.value.code == 2
+    assert "Robot2_Odometry" in capsys.readouterr().err
