@@ -133,3 +133,29 @@ def occupancy_from_message(width: int, height: int, resolution: float,
                         (float(origin[0]), float(origin[1])))
 
 
+
+
+#: The grey levels map_server's map_saver writes for occupied, free and unknown cells.
+PGM_OCCUPIED, PGM_FREE, PGM_UNKNOWN = 0, 254, 205
+
+
+def write_map_file(stem: Path, occupancy: OccupancyMap) -> Path:
+    """``stem``.yaml and ``stem``.pgm in map_server's trinary format, as map_saver writes
+    them (its thresholds too: with free_thresh 0.196 the unknown grey 205 reads back as
+    unknown, not free); the YAML's path."""
+    stem = Path(stem)
+    cells = occupancy.cells
+    image = np.full(cells.shape, PGM_UNKNOWN, dtype=np.uint8)
+    image[cells == FREE] = PGM_FREE
+    image[cells >= OCCUPIED] = PGM_OCCUPIED
+    pgm = stem.with_suffix(".pgm")
+    rows, cols = cells.shape
+    # Row 0 of the grid is at the origin, the bottom of the picture.
+    pgm.write_bytes(f"P5\n{cols} {rows}\n255\n".encode("ascii") + image[::-1].tobytes())
+    yaml_path = stem.with_suffix(".yaml")
+    x, y = occupancy.origin
+    yaml_path.write_text(
+        f"image: {pgm.name}\nmode: trinary\nresolution: {occupancy.resolution!r}\n"
+        f"origin: [{x!r}, {y!r}, 0.0]\nnegate: 0\noccupied_thresh: 0.65\n"
+        f"free_thresh: 0.196\n", encoding="utf-8")
+    return yaml_path
