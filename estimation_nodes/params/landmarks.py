@@ -3,8 +3,14 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
+
+import numpy as np
+import yaml
 
 from estimation_nodes.core.kalman.landmarks import LandmarkModel
 from estimation_nodes.core.kalman.range_bearing import SensorPose
@@ -48,3 +54,75 @@ def default_landmark_model(kind: str,
                            landmarks: Mapping[int, tuple[float, float]]) -> LandmarkModel:
     """The spec table's defaults, with filter ``kind``."""
     return landmark_model({**spec_defaults(LANDMARK_MODEL_SPECS), "filter": kind}, landmarks)
+
+
+def read_landmarks_file(path_text: str) -> dict[int, tuple[float, float]]:
+    """``landmarks: [{id: 6, x: 0.588, y: -4.282}, ...]``; ValueError naming what is wrong."""
+    if not path_text:
+        raise ValueError("landmarks_file: expected a YAML file of landmarks, got none")
+    path = Path(path_text).expanduser()
+    try:
+        document = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except OSError as error:
+        raise ValueError(f"landmarks_file: cannot read {path}: {error.strerror}") from None
+    except yaml.YAMLError as error:
+        raise ValueError(f"landmarks_file: {path} is not valid YAML: {error}") from None
+    entries = document.get("landmarks") if isinstance(document, dict) else None
+    if not isinstance(entries, list) or not entries:
+        raise ValueError(f"landmarks_file: {path}: expected 'landmarks:' with a list of "
+                         f"{{id, x, y}}")
+    landmarks: dict[int, tuple[float, float]] = {}
+    for entry in entries:
+        try:
+            key, x, y = int(entry["id"]), float(entry["x"]), float(entry["y"])
+        except (TypeError, KeyError, ValueError):
+            raise ValueError(f"landmarks_file: {path}: expected {{id, x, y}}, got "
+                             f"{entry!r}") from None
+        if not (math.isfinite(x) and math.isfinite(y)):
+            raise ValueError(f"landmarks_file: {path}: landmark {key} is not finite")
+        if key in landmarks:
+            raise ValueError(f"landmarks_file: {path}: landmark {key} is given twice")
+        landmarks[key] = (x, y)
+    return landmarks
+
+
+@dataclass(frozen=True)
+class EkfLocalizerSettings:
+    """The landmark localizer's validated parameters (EKF_LOCALIZER_SPECS)."""
+
+    model: LandmarkModel
+    initial_pose: np.ndarray
+    initial_covariance: np.ndarray
+    frame_id: str
+    reorder_horizon: float
+    diagnostics_period: float
+
+
+def build_ekf_localizer_settings(values: Mapping[str, Any],
+                                 landmarks: Mapping[int, tuple[float, float]] | None = None
+                                 ) -> EkfLocalizerSettings:
+    """Validate the node's parameters; the landmarks are read from landmarks_file unless
+    given (a runtime change does not read the file again)."""
+    if landmarks is None:
+        landmarks = read_landmarks_file(values["landmarks_file"])
+    model = landmark_model(values, landmarks)
+    pose = np.array([float(v) for v in as_list("initial_pose", values["initial_pose"])])
+    if pose.size != 3 or not np.isfinite(pose).all():
+        raise ValueError(f"initial_pose: expected [x, y, yaw], got {pose.tolist()}")
+    given = np.array([float(v) for v in as_list("initial_covariance",
+                                                values["initial_covariance"])])
+    covariance = np.diag(given) if given.size == 3 else given.reshape(3, 3) \
+        if given.size == 9 else None
+    if covariance is None:
+        raise ValueError(f"initial_covariance: expected 3 or 9 values, got {given.size}")
+    from estimation_nodes.core.validation import check_covariance
+
+    covariance = check_covariance("initial_covariance", covariance, 3)
+    if not np.linalg.eigvalsh(covariance).min() > 0:
+        raise ValueError("initial_covariance: expected a positive definite covariance")
+    frame_id = values["frame_id"]
+    if not isinstance(frame_id, str) or not frame_id.strip():
+        raise ValueError(f"frame_id: expected a frame name, got {frame_id!r}")
+    return EkfLocalizerSettings(model, pose, covariance, frame_id,
+                                bounded("reorder_horizon", values["reorder_horizon"]),
+                                bounded("diagnostics_period", values["diagnostics_period"]))

@@ -361,6 +361,21 @@ LANDMARK_MODEL_SPECS = (
 )
 
 
+EKF_LOCALIZER_SPECS = LANDMARK_MODEL_SPECS + (
+    ParamSpec("landmarks_file", "", "YAML with the landmarks: `landmarks: [{id: 6, x: 0.588, "
+              "y: -4.282}, ...]`, metres in the map frame.", read_only=True),
+    ParamSpec("initial_pose", [0.0, 0.0, 0.0], "[x, y, yaw] the filter starts from (m, m, "
+              "rad, map frame)."),
+    ParamSpec("initial_covariance", [1.0, 1.0, 0.25], "Variances of x, y and yaw it starts "
+              "with (m^2, m^2, rad^2): 3 values (a diagonal) or 9 (row-major)."),
+    ParamSpec("frame_id", "map", "Frame of the published pose."),
+    ParamSpec("reorder_horizon", 2.0, "Seconds of events kept to apply a late one in its "
+              "place (odometry and camera frames come on two topics).", read_only=True,
+              min_value=0.0, max_value=3600.0),
+    ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics messages.",
+              read_only=True, min_value=0.01, max_value=3600.0),
+)
+
 #: Each node's parameters, by node name.
 NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "estimator": ESTIMATOR_SPECS,
@@ -370,14 +385,14 @@ NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "foxglove_view": FOXGLOVE_VIEW_SPECS,
     "grid_localizer": GRID_LOCALIZER_SPECS,
     "planar_robot": PLANAR_ROBOT_SPECS,
+    "ekf_localizer": EKF_LOCALIZER_SPECS,
 }
 
 
 def spec_named(name: str, specs: tuple[ParamSpec, ...] | None = None) -> ParamSpec:
     """Parameter ``name``'s spec: from ``specs`` when given (a node's own, for a name two
     nodes use differently, such as rate_hz), else from whichever node declares it."""
-    tables = (*NODE_SPECS.values(), LANDMARK_MODEL_SPECS)
-    for candidate in specs or (spec for table in tables for spec in table):
+    for candidate in specs or (spec for table in NODE_SPECS.values() for spec in table):
         if candidate.name == name:
             return candidate
     raise KeyError(name)

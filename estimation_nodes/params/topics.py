@@ -70,6 +70,7 @@ BELIEF_MAP = "belief_map"
 LOCALIZATION_QUALITY = "localization_quality"
 TRUE_POSE = "true_pose"
 CMD_VEL = "cmd_vel"
+LANDMARK_OBSERVATIONS = "landmark_observations"
 
 #: Every topic of a grid localization run: relative name -> ROS type.
 GRID_TOPIC_TYPES = {

@@ -125,18 +125,21 @@ class Outcome:
 class LandmarkLocalization:
     """The pose (x, y, heading) and its covariance, advanced by odometry and landmarks."""
 
-    def __init__(self, model: LandmarkModel, x0: object, P0: object, t0: float) -> None:
+    def __init__(self, model: LandmarkModel, x0: object, P0: object,
+                 t0: float | None = None) -> None:
+        """Start at pose ``x0`` with covariance ``P0``, at time ``t0``; with ``t0`` None the
+        filter starts at its first event's time, whatever event that is."""
         self.model = model
         self._gate = model.gate
         self.x = as_finite_array("initial_pose", x0, ndim=1)
         if self.x.size != 3:
             raise ValueError(f"initial_pose: expected [x, y, yaw], got {self.x.tolist()}")
         self.P = check_covariance("initial_covariance", P0, 3)
-        self.t = float(t0)
+        self.t = None if t0 is None else float(t0)
         self.twist = (0.0, 0.0)
         self.counts: Counter[str] = Counter()
         self.recovering = False
-        self._last_used = float(t0)
+        self._last_used = self.t
         self._gated_since_used = 0
         self._passed_in_a_row = 0
 
@@ -168,6 +171,9 @@ class LandmarkLocalization:
     def _predict_to(self, t: float) -> None:
         if not math.isfinite(t):
             raise ValueError(f"t: expected a finite time, got {t!r}")
+        if self.t is None:
+            self.t = self._last_used = t
+            return
         dt = t - self.t
         if dt <= 0:
             # A late event is applied at the filter's time (causal_order.py puts them
@@ -229,6 +235,7 @@ class LandmarkLocalization:
 
     def _lost(self) -> bool:
         """Whether every observation was gated for recovery_time seconds."""
+        assert self.t is not None and self._last_used is not None
         return bool(self._gated_since_used) \
             and self.t - self._last_used >= self.model.recovery_time
 
