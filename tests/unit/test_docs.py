@@ -1,7 +1,11 @@
-"""The documentation agrees with the code: the node pages' parameter tables."""
+"""The documentation agrees with the code: parameter tables, links, the README's size and
+its library snippet."""
 
 from __future__ import annotations
 
+import contextlib
+import io
+import re
 from pathlib import Path
 
 import pytest
@@ -12,6 +16,14 @@ from estimation_nodes.tools import param_docs
 REPO = Path(__file__).resolve().parents[2]
 DOCS = REPO / "docs"
 NODE_PAGES = DOCS / "nodes"
+README = REPO / "README.md"
+#: A Markdown link's target: [text](target); images too.
+LINK = re.compile(r"\]\(([^)\s]+)\)")
+CODE_BLOCK = re.compile(r"```python\n(.*?)```", re.DOTALL)
+
+
+def markdown_files() -> list[Path]:
+    return [README, REPO / "CHANGELOG.md", *sorted(DOCS.rglob("*.md"))]
 
 
 @pytest.mark.parametrize("page", sorted(NODE_PAGES.glob("*.md")), ids=lambda p: p.name)
@@ -46,3 +58,49 @@ def test_a_marker_for_an_unknown_node_or_without_its_end_is_refused():
         param_docs.render_page("<!-- parameters: estimater -->\n<!-- end parameters -->\n")
     with pytest.raises(param_docs.PageError, match="without its"):
         param_docs.render_page("<!-- parameters: estimator -->\n| stale |\n")
+
+
+def test_the_readme_is_a_short_guide():
+    lines = README.read_text(encoding="utf-8").splitlines()
+    assert len(lines) <= 250, (f"README.md has {len(lines)} lines: at most 250; move the "
+                               f"detail to a page in docs/")
+
+
+@pytest.mark.parametrize("document", markdown_files(), ids=lambda p: str(p.relative_to(REPO)))
+def test_every_relative_link_leads_to_a_file(document):
+    missing = []
+    for target in LINK.findall(document.read_text(encoding="utf-8")):
+        path = target.split("#", 1)[0]
+        if not path or re.match(r"[a-z]+:", path):
+            continue
+        if not (document.parent / path).exists():
+            missing.append(target)
+    assert not missing, f"{document.relative_to(REPO)} links to files that do not exist: {missing}"
+
+
+def test_the_readme_links_every_page_of_docs():
+    linked = {(REPO / target.split("#", 1)[0]).resolve()
+              for target in LINK.findall(README.read_text(encoding="utf-8"))}
+    pages = {page.resolve() for page in DOCS.rglob("*.md")}
+    unlinked = sorted(str(page.relative_to(REPO)) for page in pages - linked)
+    assert not unlinked, f"docs pages missing from the README's index: {unlinked}"
+
+
+def python_blocks(document: Path) -> list[str]:
+    return CODE_BLOCK.findall(document.read_text(encoding="utf-8"))
+
+
+@pytest.mark.parametrize("document", [README, DOCS / "library.md"], ids=lambda p: p.name)
+def test_the_python_snippets_run_and_print_what_their_comments_say(document):
+    """Each ``print(...)  # output`` line of a snippet prints that output."""
+    blocks = python_blocks(document)
+    assert blocks, f"{document.name} shows no Python"
+    for code in blocks:
+        expected = [line.split("#", 1)[1].strip() for line in code.splitlines()
+                    if line.lstrip().startswith("print(") and "#" in line]
+        printed = io.StringIO()
+        with contextlib.redirect_stdout(printed):
+            exec(compile(code, str(document), "exec"), {})
+        shown = [line.strip() for line in printed.getvalue().splitlines()]
+        assert shown == expected, (
+            f"a snippet of {document.name} printed {shown}, its comments say {expected}")
