@@ -1,5 +1,5 @@
-"""The documentation agrees with the code: parameter tables, links, the README's size and
-its library snippet."""
+"""The documentation agrees with the code: parameter tables, links, the README's size, its
+library snippet, and a comment on every value of the scenario files."""
 
 from __future__ import annotations
 
@@ -20,6 +20,9 @@ README = REPO / "README.md"
 #: A Markdown link's target: [text](target); images too.
 LINK = re.compile(r"\]\(([^)\s]+)\)")
 CODE_BLOCK = re.compile(r"```python\n(.*?)```", re.DOTALL)
+SCENARIOS = REPO / "msgs_config"
+#: A line of a parameter file that gives a value: ``name: value``.
+VALUE_LINE = re.compile(r"^\s*(?P<name>[\w.]+):\s*[^\s#]")
 
 
 def markdown_files() -> list[Path]:
@@ -104,3 +107,27 @@ def test_the_python_snippets_run_and_print_what_their_comments_say(document):
         shown = [line.strip() for line in printed.getvalue().splitlines()]
         assert shown == expected, (
             f"a snippet of {document.name} printed {shown}, its comments say {expected}")
+
+
+def uncommented_values(text: str) -> list[str]:
+    """The parameters of a file given without a comment on their line or just above it."""
+    missing, previous = [], ""
+    for line in text.splitlines():
+        value = VALUE_LINE.match(line)
+        if value and "#" not in line and not previous.lstrip().startswith("#"):
+            missing.append(value["name"])
+        if line.strip():
+            previous = line
+    return missing
+
+
+def test_an_uncommented_value_is_found():
+    assert uncommented_values("/**:\n  ros__parameters:\n    # Why.\n    a: 1\n    b: 2\n"
+                              "    c: 3  # Why.\n") == ["b"]
+
+
+@pytest.mark.parametrize("scenario", sorted(SCENARIOS.glob("*.yaml")), ids=lambda p: p.name)
+def test_every_value_of_a_scenario_file_says_what_it_means(scenario):
+    missing = uncommented_values(scenario.read_text(encoding="utf-8"))
+    assert not missing, (f"msgs_config/{scenario.name}: say in a comment on the line above "
+                         f"what each of these means: {missing}")
