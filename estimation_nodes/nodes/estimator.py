@@ -396,10 +396,10 @@ class Estimator(Node):
 
     # Every QoS event handler is a Python waitable that rclpy's executor visits on
     # each iteration, whether or not it fires: rclpy gives each publisher and
-    # subscription two by default, 21 in all for this node, which made an idle
-    # spin 257 us instead of 138 us for a one-subscription node. Only the events
-    # worth it are kept, the inputs' six in one waitable (rclpy_internals.py; figures
-    # in bench/README.md).
+    # subscription two by default, 21 in all for this node, which made its idle
+    # spin cost far more than a one-subscription node's. Only the events worth it
+    # are kept, the inputs' six in one waitable (rclpy_internals.py; figures in
+    # docs/benchmarks.md).
 
     def _output(self, msg_type: type, topic: str, qos: Any):
         """A publisher without rclpy's default QoS event handlers.

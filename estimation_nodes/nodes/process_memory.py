@@ -3,9 +3,9 @@
 glibc gives each large allocation (over 128 KiB at first) fresh pages from the
 kernel and returns them when it is freed. A histogram step over a million
 cells makes a few arrays of 8 MB each time, so with that default every step
-pays for thousands of page faults on fresh zeroed memory, which costs here
-more than the arithmetic (measured: 9.6 ms a step instead of 3.8 ms at
-N = 1e6; see bench/README.md). Raising glibc's mmap and trim thresholds makes
+pays for thousands of page faults on fresh zeroed memory, which costs more
+than the arithmetic (figures in docs/benchmarks.md). Raising glibc's mmap and
+trim thresholds makes
 freed blocks reusable by the next step. The cost is that the process keeps
 its peak heap instead of shrinking after it; for an estimator whose arrays
 keep one size, the peak is the steady state.

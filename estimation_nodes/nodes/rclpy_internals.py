@@ -11,7 +11,7 @@ uses and fails with a message naming it. What is used and why:
   declaration takes; rclpy has no public accessor for them.
 - ``EventHandle``, ``wait_set.add_event`` / ``is_ready("event", ...)`` and
   ``take_event``: to watch the estimator's input QoS events in one waitable
-  (below). Keep this only while it measurably pays (bench/README.md, "idle
+  (below). Keep this only while it measurably pays (docs/benchmarks.md, "idle
   spin"); rclpy's public ``SubscriptionEventCallbacks`` does the same work
   with one waitable per event.
 
@@ -19,8 +19,8 @@ Why one waitable for the QoS events: rclpy makes every QoS event handler a
 Python waitable of its own, and its executor visits each waitable on every
 iteration, ready or not: counting, entering, adding to the wait set,
 checking. For the estimator's six input events (message lost and
-incompatible QoS on three inputs) that was about a sixth of its throughput
-under load (bench/README.md). One waitable holding
+incompatible QoS on three inputs) that cost a measurable share of its
+throughput under load (docs/benchmarks.md). One waitable holding
 all six event handles pays the executor's per-waitable cost once; the
 handles themselves are the same rcl events rclpy's own handlers use.
 """
@@ -72,7 +72,7 @@ class SubscriptionEvents(Waitable):
     # --- the Waitable interface the executor calls ------------------------------------------
 
     # The executor enters and leaves every waitable on each of its iterations: plain loops
-    # over the handles cost less than an ExitStack did (5.1 -> 3.1 us for ten events).
+    # over the handles cost less than an ExitStack did (docs/benchmarks.md).
 
     def __enter__(self) -> None:
         """Hold every handle for the wait; on a failure, release the ones held."""

@@ -1,10 +1,10 @@
 """The estimator's outputs as the bytes rclpy would send: CDR, built directly.
 
 Publishing a message object makes rclpy convert every field from Python to C
-and then serialize it; for the estimator's small outputs that cost more than
-the filter step (a Kalman state, its pose and stamped pose: 20 us of a 44 us
-step, against 5 us as bytes). ``Publisher.publish`` sends ``bytes`` as they
-are, so these encoders write the serialized form (the encapsulation header
+and then serialize it; for the estimator's small outputs (a Kalman state, its
+pose and stamped pose) that cost more than the filter step, and far more than
+writing the bytes (docs/benchmarks.md). ``Publisher.publish`` sends ``bytes``
+as they are, so these encoders write the serialized form (the encapsulation header
 of little-endian plain CDR, then the fields with CDR's alignment, counted
 from the end of that header) with the constant part of each layout built
 once. tests/node/test_wire.py checks each encoder byte for byte against

@@ -114,10 +114,10 @@ ESTIMATOR_SPECS = WORLD_SPECS + MATRIX_SPECS + (
               read_only=True, min_value=0.01, max_value=3600.0),
     ParamSpec("compiled_kernels", False,
               "Worlds of 65,536 cells or more: run the histogram steps as numba-compiled "
-              "kernels (a 1e6-cell step in about half the CPU time) at the price of 100 to "
-              "150 MB of resident memory for numba and LLVM and 0.5 s more start-up. Off by "
-              "default: a step through DDS at 1e6 cells is dominated by moving the two "
-              "belief messages, so the node's end-to-end rate does not change measurably.",
+              "kernels (less CPU time per step) at the price of the resident memory numba and "
+              "LLVM hold and a slower start-up. Off by default: a step through DDS on such a "
+              "world is dominated by moving the two belief messages, so the node's end-to-end "
+              "rate does not change measurably (figures: docs/benchmarks.md).",
               read_only=True),
     ParamSpec("reorder_horizon", 10.0,
               "Seconds of past events kept so that a late one (a reading that arrived before "

@@ -38,8 +38,8 @@ def fuse(x1: float, var1: float, x2: float, var2: float) -> ScalarEstimate:
 
 
 # The scalar steps are the hot path of a 1-D filter and return plain tuples:
-# building a NamedTuple costs more than the whole step's arithmetic (a
-# predict + correct measured 0.51 us with NamedTuples, 0.23 us without).
+# building a NamedTuple costs more than the whole step's arithmetic
+# (docs/benchmarks.md).
 
 
 def predict_scalar(x: float, var: float, u: float, var_u: float) -> tuple[float, float]:
@@ -77,7 +77,7 @@ def correct_scalar(
 def _symmetric(matrix: FloatArray) -> FloatArray:
     """Remove the rounding asymmetry that products of matrices leave behind."""
     # A new sum: adding matrix.T into matrix itself makes numpy copy the overlapping
-    # operand first, which cost three times more on small matrices.
+    # operand first, which costs more than the sum on small matrices.
     result = matrix + matrix.T
     result *= 0.5
     return result
@@ -95,7 +95,7 @@ def _as_vector(name: str, value: object, size: int) -> FloatArray:
 
 def _small_inverse(S: FloatArray) -> FloatArray | None:
     """S^-1 in closed form for the symmetric positive definite S = C P C' + R of one or two
-    measurements, the common cases (a LAPACK call costs several microseconds of overhead
+    measurements, the common cases (a LAPACK call's overhead outweighs the arithmetic
     on a 2 x 2); None for a larger S, or a nearly singular one, where the closed form
     loses accuracy: those go to a LAPACK solve."""
     size = S.shape[0]

@@ -8,9 +8,10 @@ the evidence, then product and scaling fused). The results equal numpy's:
 the correction bit for bit (the same operations in the same order), the
 prediction to rounding (the kernel's taps summed in another order).
 
-Importing this module imports numba (about 0.25 s); ``warm_up`` then
-compiles the kernels, or loads them from numba's cache (another 0.25 s).
-``histogram`` does both only for worlds large enough to pay that back.
+Importing this module imports numba, and ``warm_up`` then compiles the
+kernels or loads them from numba's cache; both take a noticeable part of a
+second (docs/benchmarks.md). ``histogram`` does both only for worlds large
+enough to pay that back.
 """
 
 from __future__ import annotations

@@ -29,7 +29,7 @@ from estimation_nodes.core.validation import FloatArray
 #: Worlds of at least this many cells take the compiled kernels of
 #: ``compiled`` (numba) when numba imports: from here on the passes over
 #: memory that they save outweigh numba's call overhead, and the import and
-#: cached compilation (about 0.5 s) pay back within a few steps. Smaller
+#: cached compilation pay back within a few steps. Smaller
 #: worlds never import numba, so small nodes start as fast as before.
 COMPILED_MIN_CELLS = 1 << 16
 
@@ -55,10 +55,11 @@ def _compiled_module() -> ModuleType | None:
 def compiled_kernels(size: int, allowed: bool = True) -> ModuleType | None:
     """The compiled kernels a world of ``size`` cells uses, or None for numpy's.
 
-    ``allowed=False`` always gives numpy's path (numba and LLVM hold about
-    150 MB of memory once imported). The first call for a large world
-    imports numba and compiles (or loads from cache) the kernels; a caller
-    that minds latency calls this at start-up rather than at its first step.
+    ``allowed=False`` always gives numpy's path (numba and LLVM hold a large
+    share of the process's memory once imported; docs/benchmarks.md). The
+    first call for a large world imports numba and compiles (or loads from
+    cache) the kernels; a caller that minds latency calls this at start-up
+    rather than at its first step.
     """
     return _compiled_module() if allowed and size >= COMPILED_MIN_CELLS else None
 

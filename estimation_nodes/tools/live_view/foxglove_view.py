@@ -5,7 +5,7 @@ estimation_demo, which has ``--foxglove`` for its own runs. The node
 subscribes raw to the topics by their relative names, so a namespace
 (``--ros-args -r __ns:=/robot1``) and remaps apply as they do to the nodes it
 watches, and hands the CDR bytes, untouched, to a Foxglove WebSocket server
-(tools/live_view.py) under the names they resolved to.
+(tools/live_view/server.py) under the names they resolved to.
 
 It is one more subscriber on each topic: the commander's
 ``required_subscribers`` and the sensors' ``hold_until_matched`` count it.

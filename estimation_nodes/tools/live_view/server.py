@@ -27,8 +27,9 @@ from estimation_nodes.tools.recording.mcap import schema_text
 #: while 1024 beliefs of a 1e5-cell world would hold 800 MB.
 BACKLOG = 64
 #: Seconds ``close`` waits for the server to stop. foxglove-sdk's stop waits until every
-#: client has closed gracefully, and a client that does not read held it about 50 s here;
-#: past this grace the stop goes on in a background thread and this process may end.
+#: client has closed gracefully, and a client that does not read can hold it far longer than
+#: a process should take to end (docs/benchmarks.md); past this grace the stop goes on in a
+#: background thread and this process may end.
 CLOSE_GRACE = 1.0
 _ADDRESS = re.compile(r"(?:(?:\[(?P<ipv6>[^\]]+)\]|(?P<host>[^:\[\]\s]+)):)?(?P<port>\d{1,5})")
 
