@@ -248,7 +248,7 @@ class EkfLocalizer(Node):
             values.update({"pose_x": f"{x[0]:.3f}", "pose_y": f"{x[1]:.3f}",
                            "pose_yaw_deg": f"{math.degrees(x[2]):.1f}",
                            "std_xy": f"{math.sqrt(max(P[0, 0], P[1, 1])):.3f}",
-                           "recovering": str(localization.recovering).lower()})
+                           "lost": str(localization.lost).lower()})
             values.update({f"observations.{k}": v
                            for k, v in sorted(localization.counts.items())})
         if self._nis:
@@ -257,11 +257,12 @@ class EkfLocalizer(Node):
             self._nis = self._nis[-1:]
         values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
         values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
-        warn = bool(self.rejected) or (localization is not None and localization.recovering)
+        lost = localization is not None and localization.lost
+        warn = bool(self.rejected) or lost
         status = DiagnosticStatus(
             level=DiagnosticStatus.WARN if warn else DiagnosticStatus.OK,
             name=f"{self.get_name()}: landmark localization",
-            message="recovering" if localization is not None and localization.recovering
+            message="lost: every observation gated" if lost
             else "messages rejected" if self.rejected else "ok",
             hardware_id=self.get_fully_qualified_name(),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])

@@ -347,11 +347,11 @@ LANDMARK_MODEL_SPECS = (
               "probability's Mahalanobis ellipse is counted and skipped (1: no gate).",
               min_value=0.5, max_value=1.0),
     ParamSpec("recovery_time", 5.0, "After this many seconds with every observation gated, "
-              "observations are taken ungated until one passes the gate again.",
+              "the covariance grows by recovery_std and the gate judges again.",
               min_value=0.01, max_value=3600.0),
-    ParamSpec("recovery_std", [1.0, 0.5], "[position (m), heading (rad)]: the least std the "
-              "covariance is widened to when a recovery starts (the filter no longer knows "
-              "where it is).", type_name="double_array"),
+    ParamSpec("recovery_std", [1.0, 0.5], "[position (m), heading (rad)]: the std a recovery "
+              "adds to the covariance (the filter admits it no longer knows where it is).",
+              type_name="double_array"),
     ParamSpec("ukf.alpha", 0.5, "The UKF's sigma-point spread (0 < alpha <= 1).",
               read_only=True, min_value=1e-4, max_value=1.0),
     ParamSpec("ukf.beta", 2.0, "The UKF's prior-knowledge weight (2: optimal for a Gaussian).",

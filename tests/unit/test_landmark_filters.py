@@ -287,7 +287,7 @@ def test_a_lost_filter_recovers_after_recovery_time_instead_of_gating_for_ever(k
                                       np.diag([1e-4, 1e-4, 1e-4]), 0.0)
     run(recovering, simulated_events(3))
     assert recovering.counts["recoveries"] >= 1 and recovering.counts["recovered"] >= 1
-    assert not recovering.recovering
+    assert not recovering.lost
     assert final_error(None, recovering, 3) < 0.15
 
 

@@ -11,11 +11,12 @@ quantile of chi-square with 2 degrees of freedom) is counted and skipped: a
 wrong data association or a reflection must not pull the estimate. But a filter
 whose estimate went wrong rejects every true observation too, and would stay
 lost. So when no observation was accepted for ``recovery_time`` seconds while
-some were gated, the filter is *recovering*: its covariance is widened to at
-least ``recovery_std`` (it no longer knows where it is, and says so), and it
-takes every observation ungated (each pulls the estimate toward what the camera
-sees) until ``RECOVERED_AFTER`` in a row pass the gate on their own, which shows
-the estimate agrees with the landmarks again.
+some were gated, the filter admits it no longer knows where it is: its
+covariance grows by ``recovery_std`` (in position and heading), and the gate
+judges the observation again from that; if it still does not fit, the
+covariance grows again after another ``recovery_time``, until observations pass.
+The gate stays on throughout, so a wrong identification (a landmark seen behind
+the robot) is rejected even while the filter recovers.
 """
 
 from __future__ import annotations
@@ -34,8 +35,6 @@ from estimation_nodes.core.kalman.unicycle import UnicycleNoise
 from estimation_nodes.core.validation import FloatArray, as_finite_array, check_covariance
 
 FILTERS = ("ekf", "ukf")
-#: Consecutive observations within the gate that end a recovery (one may pass by chance).
-RECOVERED_AFTER = 3
 
 
 def chi_square_2_quantile(probability: float) -> float:
@@ -61,7 +60,7 @@ class LandmarkModel:
     landmarks: Mapping[int, tuple[float, float]]
     gate_probability: float
     recovery_time: float
-    #: The smallest std of x, y (m) and heading (rad) once recovering.
+    #: The std of x, y (m) and heading (rad) a recovery adds to the covariance.
     recovery_std: tuple[float, float]
     #: The UKF's sigma points; None for the EKF.
     points: ukf.SigmaPoints | None = None
@@ -138,20 +137,18 @@ class LandmarkLocalization:
         self.t = None if t0 is None else float(t0)
         self.twist = (0.0, 0.0)
         self.counts: Counter[str] = Counter()
-        self.recovering = False
         self._last_used = self.t
         self._gated_since_used = 0
-        self._passed_in_a_row = 0
 
     # --- state, as causal_order.py saves and restores it ---------------------------------
 
     def snapshot(self) -> tuple:
-        return (self.x, self.P, self.t, self.twist, self.counts.copy(), self.recovering,
-                self._last_used, self._gated_since_used, self._passed_in_a_row)
+        return (self.x, self.P, self.t, self.twist, self.counts.copy(), self._last_used,
+                self._gated_since_used)
 
     def restore(self, state: tuple) -> None:
-        (self.x, self.P, self.t, self.twist, counts, self.recovering, self._last_used,
-         self._gated_since_used, self._passed_in_a_row) = state
+        (self.x, self.P, self.t, self.twist, counts, self._last_used,
+         self._gated_since_used) = state
         self.counts = counts.copy()
 
     # --- events --------------------------------------------------------------------------
@@ -213,19 +210,20 @@ class LandmarkLocalization:
         except (ValueError, np.linalg.LinAlgError):
             self.counts["invalid"] += 1
             return Outcome(observation, "invalid")
-        passes = nis <= self._gate
-        if not passes and not self.recovering:
+        if nis > self._gate:
             if not self._lost():
                 self.counts["gated"] += 1
                 self._gated_since_used += 1
                 return Outcome(observation, "gated", nis)
-            self._start_recovery()
-            observed = self._innovation(z, landmark)      # from the widened covariance
-        elif self.recovering:
-            self._passed_in_a_row = self._passed_in_a_row + 1 if passes else 0
-            if self._passed_in_a_row >= RECOVERED_AFTER:
-                self.recovering = False
-                self.counts["recovered"] += 1
+            # Lost: the covariance widens, and the gate judges again from it.
+            self._widen()
+            observed = self._innovation(z, landmark)
+            nis = observed.nis
+            if nis > self._gate:
+                self.counts["gated"] += 1
+                self._gated_since_used += 1
+                return Outcome(observation, "gated", nis)
+            self.counts["recovered"] += 1
         if not self._apply(observed, z):
             self.counts["unstable"] += 1
             return Outcome(observation, "unstable", nis)
@@ -233,23 +231,26 @@ class LandmarkLocalization:
         self._last_used, self._gated_since_used = self.t, 0
         return Outcome(observation, "used", nis)
 
+    @property
+    def lost(self) -> bool:
+        """Whether every observation was gated for recovery_time seconds (the next one
+        widens the covariance)."""
+        return self._lost()
+
     def _lost(self) -> bool:
-        """Whether every observation was gated for recovery_time seconds."""
-        assert self.t is not None and self._last_used is not None
+        if self.t is None or self._last_used is None:
+            return False
         return bool(self._gated_since_used) \
             and self.t - self._last_used >= self.model.recovery_time
 
-    def _start_recovery(self) -> None:
-        self.recovering = True
-        self._passed_in_a_row = 0
-        self.counts["recoveries"] += 1
-        self._widen()
-
     def _widen(self) -> None:
-        """The covariance grown to at least recovery_std in position and heading."""
+        """The covariance grown by recovery_std in position and heading: at each recovery
+        the gate opens further, until the observations fit again."""
         position, heading = self.model.recovery_std
-        floor = np.array([position, position, heading]) ** 2
-        self.P = self.P + np.diag(np.maximum(floor - np.diag(self.P), 0.0))
+        self.P = self.P + np.diag([position ** 2, position ** 2, heading ** 2])
+        self.counts["recoveries"] += 1
+        # Each widening gets its recovery_time for the observations to pass.
+        self._last_used = self.t
 
     def _apply(self, observed: Innovation, z: FloatArray) -> bool:
         """The correction applied where it leaves a finite estimate with a positive definite
