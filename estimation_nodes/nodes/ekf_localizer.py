@@ -27,8 +27,9 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 
 from estimation_nodes.core.causal_order import CausalOrder
-from estimation_nodes.core.kalman.landmarks import LandmarkLocalization, Observation
+from estimation_nodes.core.kalman.landmarks import LandmarkLocalization
 from estimation_nodes.nodes.grid_messages import covariance_3x3, planar_pose, pose_with_covariance
+from estimation_nodes.nodes.landmark_messages import MalformedCloudError, landmark_points
 from estimation_nodes.nodes.parameters import declare_and_build, overlay, rejection
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
@@ -42,38 +43,6 @@ from estimation_nodes.params.specs import EKF_LOCALIZER_SPECS
 ODOM_RANK, FRAME_RANK = 0, 1
 #: The most events the reorder history keeps, whatever reorder_horizon allows.
 MAX_REORDER_EVENTS = 10_000
-#: PointCloud2 datatypes (sensor_msgs/PointField).
-FLOAT32, UINT32 = 7, 6
-
-
-class MalformedCloudError(ValueError):
-    """A landmark cloud without the fields this node reads."""
-
-
-def landmark_points(msg: PointCloud2) -> list[Observation]:
-    """The cloud's points as range-bearing observations by landmark id."""
-    fields = {f.name: f for f in msg.fields}
-    wanted = {"x": FLOAT32, "y": FLOAT32, "id": UINT32}
-    for name, datatype in wanted.items():
-        if name not in fields or fields[name].datatype != datatype or fields[name].count != 1:
-            raise MalformedCloudError(f"expected fields x, y (float32) and id (uint32), got "
-                                      f"{sorted(fields)}")
-    count = msg.width * msg.height
-    if msg.point_step < 12 or len(msg.data) < count * msg.point_step \
-            or any(fields[n].offset + 4 > msg.point_step for n in wanted):
-        raise MalformedCloudError(f"{count} points of {msg.point_step} bytes need "
-                                  f"{count * msg.point_step} bytes, got {len(msg.data)}")
-    order = ">" if msg.is_bigendian else "<"
-    dtype = np.dtype({"names": ["x", "y", "id"],
-                      "formats": [f"{order}f4", f"{order}f4", f"{order}u4"],
-                      "offsets": [fields["x"].offset, fields["y"].offset, fields["id"].offset],
-                      "itemsize": msg.point_step})
-    points = np.frombuffer(bytes(msg.data[:count * msg.point_step]), dtype=dtype)
-    x, y = points["x"].astype(np.float64), points["y"].astype(np.float64)
-    return [Observation(int(key), float(r), float(b)) for key, r, b in
-            zip(points["id"], np.hypot(x, y), np.arctan2(y, x))]
-
-
 class _Events:
     """The filter as core/causal_order.py replays it: an event is ('odom', t, v, w) or
     ('frame', t, observations)."""
@@ -115,6 +84,8 @@ class EkfLocalizer(Node):
         self._events: _Events | None = None
         self._order: CausalOrder | None = None
         self._nis: list[float] = []
+        #: The stamp of the newest event applied: what the estimate is as of.
+        self._newest_ns = 0
         self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, topics.POSE,
                                                latched_qos(1))
         self._diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
@@ -170,6 +141,7 @@ class EkfLocalizer(Node):
             self._reject(f"bad_{kind}", f"{kind} dropped: {error}")
             return
         self.handled[kind] += 1
+        self._newest_ns = max(self._newest_ns, stamp)
         if submission.reordered:
             self.handled["events_reordered"] += 1
         if submission.too_late:
@@ -208,7 +180,7 @@ class EkfLocalizer(Node):
 
     def _restart(self) -> None:
         """The filter starts again from ``_initial`` at the next event."""
-        self._events, self._order = None, None
+        self._events, self._order, self._newest_ns = None, None, 0
 
     def _on_set_parameters(self, changes: list[Parameter]) -> SetParametersResult:
         """A change that builds valid settings is taken at once (for the events to come);
@@ -230,8 +202,7 @@ class EkfLocalizer(Node):
         assert localization is not None
         msg = pose_with_covariance(self._pose_msg, tuple(localization.x.tolist()),
                                    localization.P)
-        assert localization.t is not None
-        seconds, nanoseconds = divmod(int(round(localization.t * 1e9)), 1_000_000_000)
+        seconds, nanoseconds = divmod(self._newest_ns, 1_000_000_000)
         msg.header.stamp.sec, msg.header.stamp.nanosec = seconds, nanoseconds
         msg.header.frame_id = self._settings.frame_id
         self._pose_pub.publish(msg)

@@ -16,7 +16,14 @@ from estimation_nodes.core.kalman.landmarks import LandmarkModel
 from estimation_nodes.core.kalman.range_bearing import SensorPose
 from estimation_nodes.core.kalman.ukf import SigmaPoints
 from estimation_nodes.core.kalman.unicycle import UnicycleNoise
-from estimation_nodes.params.specs import LANDMARK_MODEL_SPECS, spec_defaults
+from estimation_nodes.core.sim.landmarks import Camera
+from estimation_nodes.params.map_files import find_map_file
+from estimation_nodes.params.specs import (
+    EKF_LOCALIZER_SPECS,
+    LANDMARK_MODEL_SPECS,
+    LANDMARK_ROBOT_SPECS,
+    spec_defaults,
+)
 from estimation_nodes.params.values import as_list, bounded
 
 NOISE_NAMES = ("translation_per_m", "translation_per_rad", "translation_per_s",
@@ -27,16 +34,13 @@ def landmark_model(values: Mapping[str, Any],
                    landmarks: Mapping[int, tuple[float, float]]) -> LandmarkModel:
     """The filter's model; ValueError naming the first bad parameter."""
     kind = values["filter"]
-    pose = [float(v) for v in as_list("sensor_pose", values["sensor_pose"])]
-    if len(pose) != 3:
-        raise ValueError(f"sensor_pose: expected [x, y, yaw], got {pose}")
     points = SigmaPoints(values["ukf.alpha"], values["ukf.beta"], values["ukf.kappa"]) \
         if kind == "ukf" else None
     noise = UnicycleNoise(**{name: bounded(f"noise.{name}", values[f"noise.{name}"])
                              for name in NOISE_NAMES})
     return LandmarkModel(kind, noise, bounded("range_std", values["range_std"]),
                          bounded("range_std_per_m", values["range_std_per_m"]),
-                         bounded("bearing_std", values["bearing_std"]), SensorPose(*pose),
+                         bounded("bearing_std", values["bearing_std"]), _sensor_pose(values),
                          dict(landmarks), bounded("gate_probability",
                                                   values["gate_probability"]),
                          bounded("recovery_time", values["recovery_time"]),
@@ -57,10 +61,12 @@ def default_landmark_model(kind: str,
 
 
 def read_landmarks_file(path_text: str) -> dict[int, tuple[float, float]]:
-    """``landmarks: [{id: 6, x: 0.588, y: -4.282}, ...]``; ValueError naming what is wrong."""
+    """``landmarks: [{id: 6, x: 0.588, y: -4.282}, ...]``; ValueError naming what is wrong.
+    A relative name not found from the working folder is looked up among the package's
+    maps, as a map file is."""
     if not path_text:
         raise ValueError("landmarks_file: expected a YAML file of landmarks, got none")
-    path = Path(path_text).expanduser()
+    path = find_map_file(str(Path(path_text).expanduser()))
     try:
         document = yaml.safe_load(path.read_text(encoding="utf-8"))
     except OSError as error:
@@ -124,5 +130,55 @@ def build_ekf_localizer_settings(values: Mapping[str, Any],
     if not isinstance(frame_id, str) or not frame_id.strip():
         raise ValueError(f"frame_id: expected a frame name, got {frame_id!r}")
     return EkfLocalizerSettings(model, pose, covariance, frame_id,
-                                bounded("reorder_horizon", values["reorder_horizon"]),
-                                bounded("diagnostics_period", values["diagnostics_period"]))
+                                bounded("reorder_horizon", values["reorder_horizon"],
+                                        EKF_LOCALIZER_SPECS),
+                                bounded("diagnostics_period", values["diagnostics_period"],
+                                        EKF_LOCALIZER_SPECS))
+
+
+def _robot(name: str, value: Any) -> float:
+    return bounded(name, value, LANDMARK_ROBOT_SPECS)
+
+
+@dataclass(frozen=True)
+class LandmarkRobotSettings:
+    """The simulated robot's validated parameters (LANDMARK_ROBOT_SPECS)."""
+
+    landmarks: dict[int, tuple[float, float]]
+    noise: UnicycleNoise
+    camera: Camera
+    seed: int
+    rate_hz: float
+    camera_rate_hz: float
+    speed: float
+    turn_rate: float
+    initial_pose: np.ndarray
+    duration: float
+    exit_when_done: bool
+
+
+def build_landmark_robot_settings(values: Mapping[str, Any]) -> LandmarkRobotSettings:
+    landmarks = read_landmarks_file(values["landmarks_file"])
+    noise = UnicycleNoise(**{name: _robot(f"noise.{name}", values[f"noise.{name}"])
+                             for name in NOISE_NAMES})
+    camera = Camera(_sensor_pose(values), _robot("camera_max_range",
+                                                  values["camera_max_range"]),
+                    _robot("camera_field_of_view", values["camera_field_of_view"]),
+                    _robot("range_std", values["range_std"]),
+                    _robot("range_std_per_m", values["range_std_per_m"]),
+                    _robot("bearing_std", values["bearing_std"]))
+    pose = np.array([float(v) for v in as_list("initial_pose", values["initial_pose"])])
+    if pose.size != 3 or not np.isfinite(pose).all():
+        raise ValueError(f"initial_pose: expected [x, y, yaw], got {pose.tolist()}")
+    return LandmarkRobotSettings(
+        landmarks, noise, camera, int(values["seed"]), _robot("rate_hz", values["rate_hz"]),
+        _robot("camera_rate_hz", values["camera_rate_hz"]), _robot("speed", values["speed"]),
+        _robot("turn_rate", values["turn_rate"]), pose, _robot("duration", values["duration"]),
+        bool(values["exit_when_done"]))
+
+
+def _sensor_pose(values: Mapping[str, Any]) -> SensorPose:
+    pose = [float(v) for v in as_list("sensor_pose", values["sensor_pose"])]
+    if len(pose) != 3:
+        raise ValueError(f"sensor_pose: expected [x, y, yaw], got {pose}")
+    return SensorPose(*pose)

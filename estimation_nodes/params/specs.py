@@ -376,6 +376,36 @@ EKF_LOCALIZER_SPECS = LANDMARK_MODEL_SPECS + (
               read_only=True, min_value=0.01, max_value=3600.0),
 )
 
+#: The simulated robot among landmarks: its noise and its camera use the landmark
+#: filter's parameter names, so one parameter file gives both the same models.
+LANDMARK_ROBOT_SPECS = tuple(
+    spec for spec in LANDMARK_MODEL_SPECS if spec.name.startswith("noise.")
+    or spec.name in ("range_std", "range_std_per_m", "bearing_std", "sensor_pose")) + (
+    ParamSpec("landmarks_file", "", "YAML with the landmarks: `landmarks: [{id: 6, x: 0.588, "
+              "y: -4.282}, ...]`, metres in the map frame.", read_only=True),
+    ParamSpec("seed", -1, "Seed of the route and of every noise; -1 draws one from the "
+              "operating system.", read_only=True),
+    ParamSpec("rate_hz", 50.0, "Odometry messages per second (each a simulation step).",
+              read_only=True, min_value=0.1, max_value=1000.0),
+    ParamSpec("camera_rate_hz", 5.0, "Camera frames per second.", read_only=True,
+              min_value=0.01, max_value=1000.0),
+    ParamSpec("camera_max_range", 6.0, "The camera sees landmarks up to this range (m).",
+              read_only=True, min_value=0.01, max_value=1000.0),
+    ParamSpec("camera_field_of_view", 1.0, "...and within this angle (rad) about its axis.",
+              read_only=True, min_value=0.01, max_value=6.3),
+    ParamSpec("speed", 0.3, "The fastest forward speed (m/s) the route commands.",
+              read_only=True, min_value=0.0, max_value=10.0),
+    ParamSpec("turn_rate", 0.6, "The fastest turn rate (rad/s) the route commands.",
+              read_only=True, min_value=0.0, max_value=20.0),
+    ParamSpec("initial_pose", [0.0, 0.0, 0.0], "[x, y, yaw] where the robot starts.",
+              read_only=True),
+    ParamSpec("duration", 0.0, "Stop after this many seconds of simulated motion (0: never); "
+              "with exit_when_done the process ends then.", read_only=True, min_value=0.0,
+              max_value=1e6),
+    ParamSpec("exit_when_done", False, "End the process when duration is over.",
+              read_only=True),
+)
+
 #: Each node's parameters, by node name.
 NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "estimator": ESTIMATOR_SPECS,
@@ -386,6 +416,7 @@ NODE_SPECS: dict[str, tuple[ParamSpec, ...]] = {
     "grid_localizer": GRID_LOCALIZER_SPECS,
     "planar_robot": PLANAR_ROBOT_SPECS,
     "ekf_localizer": EKF_LOCALIZER_SPECS,
+    "landmark_robot": LANDMARK_ROBOT_SPECS,
 }
 
 

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from estimation_nodes.core.validation import FloatArray, as_finite_array, check_finite
-from estimation_nodes.params.specs import MAX_STATE, UNSET, spec_named
+from estimation_nodes.params.specs import MAX_STATE, UNSET, ParamSpec, spec_named
 
 
 def as_list(name: str, value: Any) -> list:
@@ -21,10 +21,11 @@ def as_list(name: str, value: Any) -> list:
     return list(value)
 
 
-def bounded(name: str, value: Any) -> float:
+def bounded(name: str, value: Any, specs: tuple[ParamSpec, ...] | None = None) -> float:
     """A finite number within the bounds the spec table gives parameter ``name`` (those its
-    descriptor states to `ros2 param describe`)."""
-    spec = spec_named(name)
+    descriptor states to `ros2 param describe`): in ``specs`` when given, a node's own
+    (two nodes may bound one name differently)."""
+    spec = spec_named(name, specs)
     low, high = spec.min_value, spec.max_value
     number = check_finite(name, value)
     if low is not None and high is not None and not low <= number <= high:

@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation_nodes.nodes.landmark_messages import landmark_cloud
 from estimation_nodes.tools.importers import carmen, utias
 from estimation_nodes.tools.recording.mcap import McapRunWriter, RecordingError
 
@@ -113,7 +114,6 @@ def import_utias(directory: Path, robot: int, out: Path,
                  landmarks_file: Path | None) -> list[str]:
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Odometry
-    from sensor_msgs.msg import PointCloud2, PointField
 
     run = utias.read_run(directory, robot)
     writer = _Writer(out, {"/odom": ODOMETRY, "/landmark_observations": POINT_CLOUD,
@@ -129,24 +129,9 @@ def import_utias(directory: Path, robot: int, out: Path,
         _fill_pose(odom.pose.pose, *pose)
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = float(v), float(w)
         writer.add("/odom", t, odom)
-    fields = [PointField(name=name, offset=4 * i, datatype=datatype, count=1)
-              for i, (name, datatype) in enumerate((("x", PointField.FLOAT32),
-                                                     ("y", PointField.FLOAT32),
-                                                     ("z", PointField.FLOAT32),
-                                                     ("id", PointField.UINT32)))]
     for t, rows in run.frames():
-        cloud = PointCloud2()
-        _stamp(cloud.header, t, "camera")
-        cloud.height, cloud.width = 1, len(rows)
-        cloud.fields, cloud.is_bigendian, cloud.point_step = fields, False, 16
-        cloud.row_step, cloud.is_dense = 16 * len(rows), True
-        points = np.zeros(len(rows), dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"),
-                                            ("id", "<u4")])
-        points["x"] = rows[:, 2] * np.cos(rows[:, 3])
-        points["y"] = rows[:, 2] * np.sin(rows[:, 3])
-        points["id"] = rows[:, 1].astype(np.uint32)
-        cloud.data = points.tobytes()
-        writer.add("/landmark_observations", t, cloud)
+        seen = [(int(key), float(r), float(b)) for _, key, r, b in rows]
+        writer.add("/landmark_observations", t, landmark_cloud(_ns(t), "camera", seen))
     for t, x, y, theta in run.truth:
         truth = PoseStamped()
         _stamp(truth.header, t, "map")
