@@ -115,12 +115,12 @@ class KalmanFilter:
         if isinstance(model, ScalarKalmanModel):
             x, var = kalman.predict_scalar(
                 float(self.x[0]), float(self.P[0, 0]), _one("u", u), model.var_u)
-            self._commit(np.array([x]), np.array([[var]]))
+            self._commit(np.array([x]), np.array([[var]]), name="u")
         else:
             u_vec = as_finite_vector("u", u, model.input_size)
             with _overflow_checked_by_commit():
                 x_new = kalman._predicted_mean(self.x, u_vec, model)
-                self._commit(x_new, self._predicted_covariance())
+                self._commit(x_new, self._predicted_covariance(), name="u")
         return self.estimate
 
     def correct(self, z: float | Sequence[float]) -> PositionEstimate:
@@ -133,13 +133,13 @@ class KalmanFilter:
             z = _one("z", z)
             x_corrected, var_corrected, _ = kalman.correct_scalar(x, var, z, model.var_z)
             nis = kalman.normalized_innovation_squared_scalar(x, var, z, model.var_z)
-            self._commit(np.array([x_corrected]), np.array([[var_corrected]]), nis)
+            self._commit(np.array([x_corrected]), np.array([[var_corrected]]), nis, name="z")
         else:
             z_vec = as_finite_vector("z", z, model.measurement_size)
             with _overflow_checked_by_commit():
                 gain = self._correction_gain()
                 x_new, nis = kalman._corrected_mean(self.x, z_vec, gain, model)
-                self._commit(x_new, gain.P, nis)
+                self._commit(x_new, gain.P, nis, name="z")
         return self.estimate
 
     def prepare(self) -> None:
@@ -189,15 +189,16 @@ class KalmanFilter:
             prepared.gain = kalman.correction_gain(prepared.P, prepared.model)
         return prepared.gain
 
-    def _commit(self, x: FloatArray, P: FloatArray, nis: float | None = None) -> None:
+    def _commit(self, x: FloatArray, P: FloatArray, nis: float | None = None, *,
+                name: str) -> None:
         """Take a step's result only if every number of it is finite. (P is: the steps
         that make it, kalman.predicted_covariance, correction_gain and the scalar ones,
         refuse one that is not.)"""
         # Python's isfinite over a few values beats a numpy ufunc call.
         if not (all(map(math.isfinite, x.tolist())) and (nis is None or math.isfinite(nis))):
             raise errors.NonFiniteResultError(
-                "the result would not be finite (the input is too extreme for the current "
-                "estimate); estimate kept")
+                f"{name}: the result would not be finite (the input is too extreme for the "
+                f"current estimate); estimate kept")
         self.x, self.P = x, P
         if nis is not None:
             self.last_nis = nis

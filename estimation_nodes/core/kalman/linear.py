@@ -64,8 +64,12 @@ def fuse(x1: float, var1: float, x2: float, var2: float) -> ScalarEstimate:
         raise InvalidInputError("var1, var2: expected at least one variance > 0, got two 0s")
     estimate = ScalarEstimate((var2 * x1 + var1 * x2) / total, var1 * var2 / total)
     if not (math.isfinite(estimate.x) and math.isfinite(estimate.var)):
-        raise NonFiniteResultError(f"x1, x2: the fused estimate overflows ({x1!r}, {x2!r} with "
-                                   f"variances {var1!r}, {var2!r})")
+        # A product overflowed on the way, not the answer: the same as a weighted step.
+        weight = var1 / total
+        estimate = ScalarEstimate(x1 + weight * (x2 - x1), weight * var2)
+    if not (math.isfinite(estimate.x) and math.isfinite(estimate.var)):
+        raise NonFiniteResultError(f"x1, var1, x2, var2: the fused estimate overflows ({x1!r}, "
+                                   f"{x2!r} with variances {var1!r}, {var2!r})")
     return estimate
 
 
@@ -85,12 +89,12 @@ def predict_scalar(x: float, var: float, u: float, var_u: float) -> tuple[float,
         x_new, var_new = x + u, var + var_u
         ok = (math.isfinite(u) and math.isfinite(x_new) and var >= 0.0 and var_u >= 0.0
               and math.isfinite(var_new))
-    except TypeError:
+    except (TypeError, ValueError):   # not numbers, or arrays (no truth value)
         ok = False
     if not ok:
         _refuse_scalar(("u", u), ("x", x), ("var", var), ("var_u", var_u))
-        raise NonFiniteResultError(f"u: x + u overflows ({x!r} + {u!r}), or var + var_u "
-                                   f"({var!r} + {var_u!r}); estimate kept")
+        raise NonFiniteResultError(f"x, u, var, var_u: x + u ({x!r} + {u!r}) or var + var_u "
+                                   f"({var!r} + {var_u!r}) overflows; estimate kept")
     return x_new, var_new
 
 
@@ -103,12 +107,16 @@ def _refuse_scalar(*named: tuple[str, float]) -> None:
             check_non_negative(name, number)
 
 
+#: Above this gain the scalar correction's variance is w var_z rather than (1 - w) var.
+_GAIN_NEAR_ONE = 1.0 - 1e-8
+
+
 def correct_scalar(
     x: float, var: float, z: float, var_z: float
 ) -> tuple[float, float, float]:
     """Correction of Algorithm 4 with the gain w = var / (var + var_z).
 
-    x' = x + w (z - x),   var' = (1 - w) var
+    x' = x + w (z - x),   var' = (1 - w) var   (= w var_z, taken so for w within 1e-8 of 1)
 
     Returns ``(x, var, gain)``; raises ``ValueError`` for a NaN or infinite
     ``z`` (or x, or variances not finite and >= 0, or both 0), and nothing is
@@ -117,17 +125,25 @@ def correct_scalar(
     try:
         total = var + var_z
         ok = (math.isfinite(z) and var >= 0.0 and var_z >= 0.0 and 0.0 < total < math.inf)
-    except TypeError:
+        if ok:
+            gain = var / total
+            x_new = x + gain * (z - x)
+            if not math.isfinite(x_new):   # z - x overflowed, perhaps not the answer
+                x_new = (1.0 - gain) * x + gain * z
+            ok = math.isfinite(x_new)
+    except (TypeError, ValueError):   # not numbers, or arrays (no truth value)
         ok = False
     if not ok:
         _refuse_scalar(("z", z), ("x", x), ("var", var), ("var_z", var_z))
-        raise InvalidInputError(f"var, var_z: expected a finite sum > 0, got {var!r} + "
-                                f"{var_z!r}")
-    gain = var / total
-    x_new = x + gain * (z - x)
-    if not math.isfinite(x_new):
-        _refuse_scalar(("x", x))
-        raise NonFiniteResultError(f"z: z - x overflows ({z!r} - {x!r}); estimate kept")
+        if not 0.0 < float(var) + float(var_z) < math.inf:
+            raise InvalidInputError(f"var, var_z: expected a finite sum > 0, got {var!r} + "
+                                    f"{var_z!r}")
+        raise NonFiniteResultError(f"x, z: z - x overflows ({z!r} - {x!r}); estimate kept")
+    if gain > _GAIN_NEAR_ONE:
+        # (1 - w) var loses its digits as w nears 1 (a prior far wider than the measurement:
+        # from var / var_z ~ 1e16 on w is 1 exactly and var' would be 0, a filter certain
+        # for ever); w var_z is the same quantity without the cancellation.
+        return x_new, gain * var_z, gain
     return x_new, (1.0 - gain) * var, gain
 
 
@@ -249,7 +265,7 @@ def predicted_mean(x: FloatArray, u: object, model: LinearGaussianModel) -> Floa
     x = _state(x, model)
     x_pred = _predicted_mean(x, _as_vector("u", u, model.input_size), model)
     if not _finite(x_pred):
-        raise _overflows("x: the predicted mean A x + B u", x=x)
+        raise _overflows("x, u: the predicted mean A x + B u", x=x)
     return x_pred
 
 
@@ -268,7 +284,7 @@ def predict(
     u_vec = _as_vector("u", u, model.input_size)
     x_pred, P_pred = _predicted_mean(x, u_vec, model), _predicted_covariance(P, model)
     if not _finite(x_pred, P_pred):
-        raise _overflows("x, P: the prediction", x=x, P=P)
+        raise _overflows("x, P, u: the prediction", x=x, P=P)
     return x_pred, P_pred
 
 
@@ -317,9 +333,10 @@ def _correction_gain(P: FloatArray, model: LinearGaussianModel) -> CorrectionGai
     I_KC = model.identity - K.dot(C)
     P_new = I_KC.dot(P).dot(I_KC.T)
     P_new += K.dot(R).dot(K.T)
+    P_new = _symmetric(P_new)
     if not _finite(K, P_new):
         raise _overflows("P: the gain or the corrected covariance", P=P)
-    return CorrectionGain(K, _symmetric(P_new), innovation_cov, S_inv)
+    return CorrectionGain(K, P_new, innovation_cov, S_inv)
 
 
 def corrected_mean(
@@ -337,7 +354,7 @@ def corrected_mean(
                                 f"{short(gain)}")
     x_new, nis = _corrected_mean(x, z_vec, gain, model)
     if not (_finite(x_new) and math.isfinite(nis)):
-        raise _overflows("z: the corrected mean or its NIS", x=x)
+        raise _overflows("x, z: the corrected mean or its NIS", x=x)
     return x_new, nis
 
 
@@ -377,7 +394,7 @@ def correct_with_nis(
     gain = _correction_gain(P, model)
     x_new, nis = _corrected_mean(x, z_vec, gain, model)
     if not (_finite(x_new) and math.isfinite(nis)):
-        raise _overflows("z: the corrected mean or its NIS", x=x)
+        raise _overflows("x, P, z: the corrected mean or its NIS", x=x)
     return x_new, gain.P, gain.K, nis
 
 
@@ -392,13 +409,13 @@ def normalized_innovation_squared_scalar(x: float, var: float, z: float, var_z: 
         innovation = z - x
         nis = innovation * innovation / total if total > 0.0 else math.nan
         ok = math.isfinite(nis) and var >= 0.0 and var_z >= 0.0 and math.isfinite(total)
-    except TypeError:
+    except (TypeError, ValueError):   # not numbers, or arrays (no truth value)
         ok = False
     if not ok:
         _refuse_scalar(("z", z), ("x", x), ("var", var), ("var_z", var_z))
         if not total > 0.0:
             raise InvalidInputError(f"var, var_z: expected a sum > 0, got {var!r} + {var_z!r}")
-        raise _overflows(f"z: the NIS of z = {z!r} about x = {x!r}")
+        raise _overflows(f"x, z, var, var_z: the NIS of z = {z!r} about x = {x!r}")
     return nis
 
 
@@ -418,5 +435,5 @@ def normalized_innovation_squared(
         raise _overflows("P: the NIS (the innovation covariance C P C' + R is "
                          "singular)", x=x, P=P) from None
     if not math.isfinite(nis):
-        raise _overflows(f"z: the NIS of {z_vec.tolist()}", x=x, P=P)
+        raise _overflows(f"x, P, z: the NIS of {z_vec.tolist()}", x=x, P=P)
     return nis

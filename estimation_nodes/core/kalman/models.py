@@ -17,6 +17,7 @@ from estimation_nodes.core.validation import (
     FloatArray,
     as_finite_array,
     check_covariance,
+    check_finite,
     check_positive,
     short,
 )
@@ -121,6 +122,7 @@ class LinearGaussianModel:
     def scalar(cls, var_u: float, var_z: float) -> LinearGaussianModel:
         """A = B = C = F = 1: the matrix form of Algorithm 4."""
         one = np.ones((1, 1))
+        var_u, var_z = check_finite("var_u", var_u), check_finite("var_z", var_z)
         return cls(one, one, one, one, np.array([[var_u]]), np.array([[var_z]]))
 
 
