@@ -33,6 +33,7 @@ the builder refuses it (params/maps.py).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from functools import cache
 from types import ModuleType
@@ -66,6 +67,8 @@ COMPILED_MIN_STATES = 100_000
 #: A blur along x or y never needs more taps than the axis has cells, nor one over the
 #: headings more than the headings (see ``_reaching_taps`` and ``_heading_taps``).
 MAX_TAPS_HALF_WIDTH = 1 << 20
+#: How far (m) a map may reach from (0, 0): squares of distances on it stay finite.
+MAX_MAP_EXTENT = 1e150
 #: A scan's sum of log likelihoods stays within this (beams x the largest |log likelihood|
 #: of the model), so it never overflows.
 LOG_SUM_LIMIT = 1e300
@@ -108,6 +111,10 @@ class GridModel:
         if not np.isfinite(log_field).all():
             raise InvalidInputError("log_field: expected finite log likelihoods")
         log_outside = check_finite("log_outside", self.log_outside)
+        if not resolution * max(free.shape) + max(map(abs, origin)) < MAX_MAP_EXTENT:
+            raise InvalidInputError(
+                f"resolution, origin: a map of {free.shape[1]} x {free.shape[0]} cells of "
+                f"{resolution:g} m at {origin} reaches past {MAX_MAP_EXTENT:g} m")
         for name, value in (("free", free), ("log_field", log_field), ("log_outside", log_outside),
                             ("resolution", resolution), ("origin", origin),
                             ("heading_bins", heading_bins)):
@@ -311,8 +318,9 @@ def gaussian_prior(model: GridModel, x: float, y: float, yaw: float,
                     + 2 * information[0, 2] * dx * dyaw + 2 * information[1, 2] * dy * dyaw)
         lowest = exponent.min()
     if not math.isfinite(lowest):   # NaN or inf anywhere: min is NaN, or inf everywhere
-        raise NonFiniteResultError(f"x, y: the pose ({x:g}, {y:g}) is too far from the map "
-                                   f"(or the covariance too extreme) for a finite prior")
+        raise NonFiniteResultError(f"x, y, covariance: the pose ({x:g}, {y:g}) is too far "
+                                   f"from the map (or the covariance too extreme) for a "
+                                   f"finite prior")
     belief = np.exp(-0.5 * (exponent - lowest)) * model.free[None, :, :]
     total = belief.sum()
     if not total > 0:
@@ -334,7 +342,7 @@ def odometry_delta(previous: tuple[float, float, float],
     dx, dy = current[0] - previous[0], current[1] - previous[1]
     turn = current[2] - previous[2]
     if not (math.isfinite(dx) and math.isfinite(dy) and math.isfinite(turn)):
-        raise NonFiniteResultError("current: its difference from previous overflows: "
+        raise NonFiniteResultError("previous, current: their difference overflows: "
                                    f"{current} and {previous}")
     trans = math.hypot(dx, dy)
     rot1 = _wrap_scalar(math.atan2(dy, dx) - previous[2]) if trans > 1e-9 else 0.0
@@ -363,15 +371,19 @@ def compiled_kernels(states: int, allowed: bool = True) -> ModuleType | None:
 
 def motion_noise(delta: tuple[float, float, float], noise: OdometryNoise,
                  model: GridModel) -> tuple[float, float]:
-    """The spread of a motion: std in cells (x and y) and in heading bins (inf when the
-    motion is so extreme that it overflows)."""
+    """The spread of a motion: std in cells (x and y) and in heading bins."""
     if not isinstance(noise, OdometryNoise):
         raise InvalidInputError(f"noise: expected an OdometryNoise, got {type(noise).__name__}")
-    return _motion_noise(check_delta(delta), noise, _check_model(model))
+    sigma_cells, sigma_bins = _motion_noise(check_delta(delta), noise, _check_model(model))
+    if not (math.isfinite(sigma_cells) and math.isfinite(sigma_bins)):
+        raise NonFiniteResultError(f"delta, noise: the spread of {delta} overflows")
+    return sigma_cells, sigma_bins
 
 
 def _motion_noise(delta: tuple[float, float, float], noise: OdometryNoise,
                   model: GridModel) -> tuple[float, float]:
+    """``motion_noise``: inf when the motion is so extreme that it overflows (the blurs
+    take an infinite sigma as an even spread)."""
     rot1, trans, rot2 = delta
     sigma_m = noise.floor_m + noise.alpha3 * trans + noise.alpha4 * (abs(rot1) + abs(rot2))
     sigma_rad = noise.floor_rad + noise.alpha1 * (abs(rot1) + abs(rot2)) + noise.alpha2 * trans
@@ -549,26 +561,48 @@ def correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angle
 
 def _correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angles: FloatArray,
                   compiled: bool = True) -> tuple[FloatArray, float]:
-    return _correct_in(_scan_log_likelihood(model, ranges, angles, compiled), belief)
+    return _correct_in(_scan_log_likelihood(model, ranges, angles, compiled), belief,
+                       lambda: _scan_log_likelihood(model, ranges, angles, compiled))
 
 
-def _correct_in(log_likelihood: FloatArray, belief: FloatArray) -> tuple[FloatArray, float]:
+def _correct_in(log_likelihood: FloatArray, belief: FloatArray,
+                again: Callable[[], FloatArray]) -> tuple[FloatArray, float]:
     """``correct``, the posterior written over ``log_likelihood`` (an array of ours): a
-    tensor of millions of states allocated anew costs more than the arithmetic."""
+    tensor of millions of states allocated anew costs more than the arithmetic.
+
+    The weights are taken relative to the largest log likelihood. When that is of a state
+    the belief rules out and so far above the others that every weight underflows, the
+    log likelihood is made ``again`` and weighed relative to the largest among the states
+    the belief allows: the evidence was not zero, only too small for that scale.
+    """
     peak = float(log_likelihood.max())
     if not peak < math.inf:   # NaN anywhere makes the maximum NaN
         raise InvalidInputError(f"log_likelihood: expected numbers below inf, got "
                                 f"{'NaN' if math.isnan(peak) else peak}")
     if peak == -math.inf:
         raise ZeroEvidenceError("every state rules the scan out (log likelihood -inf)")
-    weighted = np.subtract(log_likelihood, peak, out=log_likelihood)
-    np.exp(weighted, out=weighted)
-    np.multiply(weighted, belief, out=weighted)
-    total = float(weighted.sum())
+    weighted, total = _weighted(log_likelihood, peak, belief)
+    if not total > 0:
+        possible = belief > 0
+        if possible.any():
+            log_likelihood = again()
+            log_likelihood[~possible] = -math.inf   # exp(+huge) * 0 would be NaN
+            peak = float(log_likelihood.max())
+            if peak > -math.inf:
+                weighted, total = _weighted(log_likelihood, peak, belief)
     if not total > 0:
         raise ZeroEvidenceError("every state with probability rules the scan out")
     weighted /= total
     return weighted, peak + math.log(total)
+
+
+def _weighted(log_likelihood: FloatArray, peak: float,
+              belief: FloatArray) -> tuple[FloatArray, float]:
+    """belief * exp(log_likelihood - peak), written over log_likelihood, and its sum."""
+    weighted = np.subtract(log_likelihood, peak, out=log_likelihood)
+    np.exp(weighted, out=weighted)
+    np.multiply(weighted, belief, out=weighted)
+    return weighted, float(weighted.sum())
 
 
 def correct(belief: FloatArray, log_likelihood: FloatArray) -> tuple[FloatArray, float]:
@@ -577,12 +611,12 @@ def correct(belief: FloatArray, log_likelihood: FloatArray) -> tuple[FloatArray,
     ``log_likelihood`` of the belief's shape, below inf (-inf: that state is ruled out).
     """
     belief = _any_belief(belief, ndim=None)
-    log_likelihood = np.array(as_real_array("log_likelihood", log_likelihood),
-                              dtype=np.float64)
-    if log_likelihood.shape != belief.shape:
-        raise InputSizeError(f"log_likelihood: expected the belief's shape {belief.shape}, "
-                             f"got {log_likelihood.shape}")
-    return _correct_in(log_likelihood, belief)
+    given = as_real_array("log_likelihood", log_likelihood)
+    if given.shape != belief.shape:
+        raise InputSizeError(f"belief, log_likelihood: expected one shape, got "
+                             f"{belief.shape} and {given.shape}")
+    return _correct_in(np.array(given, dtype=np.float64), belief,
+                       lambda: np.array(given, dtype=np.float64))
 
 
 # --- what the belief says ------------------------------------------------------------------
@@ -664,8 +698,12 @@ def mass_near(belief: FloatArray, model: GridModel, pose: tuple[float, float, fl
 def _mass_near(belief: FloatArray, model: GridModel, pose: tuple[float, float, float],
                radius: float, angle: float) -> float:
     xs, ys = model.cell_centres()
-    with np.errstate(over="ignore"):
-        near_xy = ((xs[None, :] - pose[0]) ** 2 + (ys[:, None] - pose[1]) ** 2) <= radius ** 2
+    dx, dy = xs[None, :] - pose[0], ys[:, None] - pose[1]
+    if radius < 1e150:
+        with np.errstate(over="ignore"):   # a pose that far is near no cell: inf > r^2
+            near_xy = (dx ** 2 + dy ** 2) <= radius ** 2
+    else:   # r^2 would overflow (an OverflowError of Python's floats): compare distances
+        near_xy = np.hypot(dx, dy) <= radius
     near_k = np.abs(_wrap(model.headings() - pose[2])) <= angle
     return float(belief[near_k][:, near_xy].sum())
 
