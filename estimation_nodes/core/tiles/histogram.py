@@ -207,8 +207,8 @@ def correct(
         raise InputSizeError(f"belief: expected a vector of at least one cell, got shape "
                              f"{belief.shape}")
     if likelihood.shape != belief.shape:
-        raise InputSizeError(f"likelihood: expected {belief.size} values (one per cell), "
-                             f"got shape {likelihood.shape}")
+        raise InputSizeError(f"belief, likelihood: expected one likelihood per cell, got "
+                             f"shapes {belief.shape} and {likelihood.shape}")
     if out is not None and not (isinstance(out, np.ndarray) and out.dtype == np.float64
                                 and out.shape == belief.shape and out.flags.writeable
                                 and out.flags.c_contiguous):
@@ -261,7 +261,7 @@ def _refuse(evidence: float, belief: FloatArray, likelihood: FloatArray) -> None
             raise InvalidInputError(f"{name}: expected finite numbers, got {short(values)}")
     if math.isinf(evidence):
         raise NonFiniteResultError(
-            "likelihood: the evidence sum(belief * likelihood) overflows; belief kept")
+            "belief, likelihood: the evidence sum(belief * likelihood) overflows; belief kept")
     raise ZeroEvidenceError(
         f"observation has evidence {evidence!r}: every cell of the belief rules it out"
     )
