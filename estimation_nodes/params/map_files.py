@@ -23,7 +23,14 @@ from typing import Any
 import numpy as np
 import yaml
 
+from estimation_nodes.core.errors import InvalidInputError
 from estimation_nodes.core.grid.steps import GridModel
+from estimation_nodes.core.validation import (
+    as_real_array,
+    check_integer,
+    check_non_negative,
+    check_positive,
+)
 
 #: OccupancyGrid cell values (nav_msgs): free, occupied, unknown.
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1
@@ -43,12 +50,25 @@ class OccupancyMap:
     origin: tuple[float, float]
 
     def __post_init__(self) -> None:
-        if self.cells.ndim != 2 or 0 in self.cells.shape:
-            raise MapError(f"map: expected a 2-D grid of cells, got shape {self.cells.shape}")
-        if not (math.isfinite(self.resolution) and self.resolution > 0):
-            raise MapError(f"resolution: expected a finite value > 0, got {self.resolution}")
-        if not all(math.isfinite(v) for v in self.origin):
-            raise MapError(f"origin: expected finite x and y, got {list(self.origin)}")
+        cells = np.asarray(self.cells) if isinstance(self.cells, (np.ndarray, list)) else None
+        if cells is None or cells.dtype.kind not in "iu":
+            raise MapError(f"map: expected a 2-D grid of integer cells, got {self.cells!r:.80}")
+        if cells.ndim != 2 or 0 in cells.shape:
+            raise MapError(f"map: expected a 2-D grid of cells, got shape {cells.shape}")
+        try:
+            resolution = check_positive("resolution", self.resolution)
+        except InvalidInputError:
+            raise MapError(f"resolution: expected a finite value > 0, got {self.resolution!r}") \
+                from None
+        try:
+            origin = tuple(float(v) for v in self.origin)
+        except (TypeError, ValueError):
+            origin = ()
+        if len(origin) != 2 or not all(math.isfinite(v) for v in origin):
+            raise MapError(f"origin: expected finite x and y, got {self.origin!r}")
+        object.__setattr__(self, "cells", cells)
+        object.__setattr__(self, "resolution", resolution)
+        object.__setattr__(self, "origin", origin)
 
 
 @dataclass(frozen=True)
@@ -60,6 +80,14 @@ class SensorField:
     sigma_hit: float = 0.2
     max_range: float = 12.0
     max_distance: float = 2.0
+
+    def __post_init__(self) -> None:
+        for name in ("z_hit", "z_rand"):
+            object.__setattr__(self, name, check_non_negative(name, getattr(self, name)))
+        for name in ("sigma_hit", "max_range", "max_distance"):
+            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
+        if not self.z_hit + self.z_rand > 0:
+            raise InvalidInputError("z_hit, z_rand: expected at least one > 0, got two 0s")
 
 
 def find_map_file(name: str) -> Path:
@@ -161,6 +189,15 @@ def occupancy_from_pixels(pixels: np.ndarray, negate: bool, occupied_thresh: flo
 def grid_model(occupancy: OccupancyMap, resolution: float, heading_bins: int,
                sensor: SensorField, max_states: int) -> GridModel:
     """The localizer's state grid and likelihood field for ``occupancy``."""
+    if not isinstance(occupancy, OccupancyMap) or not isinstance(sensor, SensorField):
+        raise MapError(f"occupancy, sensor: expected an OccupancyMap and a SensorField, got "
+                       f"{type(occupancy).__name__} and {type(sensor).__name__}")
+    try:
+        resolution = check_positive("resolution", resolution)
+        heading_bins = check_integer("heading_bins", heading_bins)
+        max_states = check_integer("max_states", max_states)
+    except InvalidInputError as error:
+        raise MapError(str(error)) from None
     factor = resolution / occupancy.resolution
     if abs(factor - round(factor)) > 1e-6 or round(factor) < 1:
         raise MapError(f"resolution: expected a whole multiple of the map's "
@@ -190,7 +227,11 @@ def grid_model(occupancy: OccupancyMap, resolution: float, heading_bins: int,
 def log_field(distance: np.ndarray, sensor: SensorField) -> np.ndarray:
     """log(z_hit exp(-d^2 / 2 sigma^2) + z_rand / max_range): a beam ending ``distance``
     from the nearest obstacle (AMCL's likelihood field)."""
-    hit = sensor.z_hit * np.exp(-0.5 * (distance / sensor.sigma_hit) ** 2)
+    distance = as_real_array("distance", distance)
+    if not np.all(distance >= 0):   # NaN fails too
+        raise InvalidInputError("distance: expected distances >= 0 (inf: no obstacle)")
+    with np.errstate(over="ignore"):   # a huge distance is exp(-inf) = 0: no hit
+        hit = sensor.z_hit * np.exp(-0.5 * (distance / sensor.sigma_hit) ** 2)
     return np.log(hit + sensor.z_rand / sensor.max_range)
 
 
