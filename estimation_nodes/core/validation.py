@@ -24,6 +24,8 @@ FloatArray = npt.NDArray[np.float64]
 
 #: How far a probability vector's sum may stray from 1 (rounding in YAML files).
 SUM_TOLERANCE = 1e-9
+#: How far above 1 a belief's value may be: the rounding of a normalization, not an error.
+PROBABILITY_TOLERANCE = 1e-12
 #: Relative tolerance for symmetry and for the smallest eigenvalue of a covariance.
 MATRIX_TOLERANCE = 1e-9
 #: numpy dtype kinds that are real numbers: bool, signed and unsigned int, float.
@@ -164,12 +166,14 @@ def _what_is_wrong(array: FloatArray, lowest: float, highest: float) -> str:
 
 
 def check_probabilities(name: str, value: Any, shape: tuple[int, ...]) -> FloatArray:
-    """A belief: values in [0, 1] (not necessarily summing to 1), of ``shape``; C-contiguous
-    float64, the caller's own array when it is one. Two passes (min and max)."""
+    """A belief: values in [0, 1] (not necessarily summing to 1; PROBABILITY_TOLERANCE
+    above 1 for rounding), of ``shape``; C-contiguous float64, the caller's own array when
+    it is one. Two passes (min and max)."""
     array = _shaped(name, value, shape)
-    if not (array.min() >= 0.0 and array.max() <= 1.0):   # NaN fails both
+    highest = 1.0 + PROBABILITY_TOLERANCE
+    if not (array.min() >= 0.0 and array.max() <= highest):   # NaN fails both
         raise InvalidInputError(f"{name}: expected probabilities in [0, 1], got "
-                                f"{_what_is_wrong(array, 0.0, 1.0)}")
+                                f"{_what_is_wrong(array, 0.0, highest)}")
     return array
 
 
