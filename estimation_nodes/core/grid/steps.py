@@ -27,7 +27,7 @@ The checks of a belief are two numpy reductions; the running localizer
 (underscored here) on the belief it holds.
 
 The map's rotation (an OccupancyGrid origin with yaw) is not supported here:
-the builder refuses it (params/maps.py).
+the builder refuses it (params/map_files.py).
 """
 
 from __future__ import annotations
