@@ -10,12 +10,17 @@ class EstimationError(ValueError):
     """An input that a model or filter step refuses."""
 
 
+class InvalidInputError(EstimationError):
+    """An argument of the wrong type or shape, or with a value outside its domain (NaN,
+    inf, a negative variance or probability, a range that is no reading)."""
+
+
+class InputSizeError(InvalidInputError):
+    """An input or measurement with another number of values than the model takes."""
+
+
 class ZeroEvidenceError(EstimationError):
     """An observation that every state of the belief rules out: p(z) = 0."""
-
-
-class InputSizeError(EstimationError):
-    """An input or measurement with another number of values than the model takes."""
 
 
 class NonFiniteResultError(EstimationError):

@@ -172,6 +172,9 @@ class GridLocalizer(Node):
         except errors.ZeroEvidenceError as error:
             self._reject("zero_evidence", f"scan dropped: {error}")
             return
+        except errors.EstimationError as error:   # what scan_beams let through, or the motion
+            self._reject("bad_scan", f"scan dropped: {error}")
+            return
         self.last_update_s = time.perf_counter() - started
         self.handled["scan"] += 1
         self._publish(Time.from_msg(msg.header.stamp))
@@ -186,8 +189,8 @@ class GridLocalizer(Node):
             return
         try:
             self.localization.set_prior(pose, covariance)
-        except np.linalg.LinAlgError:
-            self._reject("bad_initialpose", "initialpose dropped: its covariance is singular")
+        except errors.EstimationError as error:   # not a covariance, or singular
+            self._reject("bad_initialpose", f"initialpose dropped: {error}")
             return
         self.handled["initialpose"] += 1
         self.get_logger().info(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}, "

@@ -60,15 +60,16 @@ def scan_beams(scan, laser_max_range: float,
     """The beams of a LaserScan to score: (ranges, angles) of at most ``max_beams`` valid
     readings, evenly chosen, and how many readings were NaN. Readings at or beyond the
     range (the scan's range_max, or ``laser_max_range`` if that is shorter or the scan's
-    is unset; inf is "no return", REP 117) or below range_min are not scored; NaN ones
-    are counted."""
+    is unset; inf is "no return", REP 117) or below range_min (or 0) are not scored; NaN
+    ones are counted."""
     range_max = min(scan.range_max, laser_max_range) \
         if math.isfinite(scan.range_max) and scan.range_max > 0 else laser_max_range
     range_min = scan.range_min
     values = np.asarray(scan.ranges, dtype=np.float64)
     angles = scan.angle_min + scan.angle_increment * np.arange(values.size)
     nan = int(np.isnan(values).sum())
-    valid = np.isfinite(values) & (values >= range_min) & (values < range_max)
+    # A negative reading is no return either, whatever range_min a malformed scan gives.
+    valid = np.isfinite(values) & (values >= max(range_min, 0.0)) & (values < range_max)
     chosen = np.flatnonzero(valid)
     if chosen.size > max_beams:
         chosen = chosen[np.linspace(0, chosen.size - 1, max_beams).round().astype(int)]

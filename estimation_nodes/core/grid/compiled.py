@@ -1,4 +1,4 @@
-"""Compiled kernels of the grid filter (numba): the same steps as core/grid.py in fewer passes.
+"""Compiled kernels of the grid filter (numba): the steps of grid/steps.py in fewer passes.
 
 numpy's prediction makes some fifty passes over the belief tensor (a shift
 per layer and per bilinear weight, two rolls for the headings, padded copies
@@ -11,6 +11,13 @@ both paths against brute force.
 
 Importing this module imports numba; ``warm_up`` compiles the kernels or
 loads them from numba's cache (``cache=True``).
+
+The kernels check no index (numba does not): steps.py guarantees every one is
+in bounds before it calls them. Beliefs are of the model's shape; the shifts
+are at most the grid's size plus one (a longer one moves everything off it) and
+the turn at most the number of headings, so each becomes an int64 exactly; the
+taps of a blur are at most as wide as the axis needs; the field is padded by
+more than every beam's end point offset, and those are cut to the map's size.
 """
 
 from __future__ import annotations
@@ -27,7 +34,9 @@ _jit = njit(nogil=True, cache=True)
 def shift_motion(belief: FloatArray, shift_rows: FloatArray, shift_cols: FloatArray,
                  turn: float, out: FloatArray) -> None:
     """out = belief moved: layer k by (shift_rows[k], shift_cols[k]) cells (bilinear),
-    every heading by ``turn`` bins (linear, cyclic); mass leaving the grid is lost."""
+    every heading by ``turn`` bins (linear, cyclic); mass leaving the grid is lost.
+    ``shift_rows`` and ``shift_cols`` have one value per heading, each within the grid's
+    size plus one; |turn| is at most the number of headings."""
     bins, rows, cols = belief.shape
     out[:] = 0.0
     turn_base = int(np.floor(turn))
@@ -131,17 +140,19 @@ def blur_cols_masked(source: FloatArray, taps: FloatArray, free: np.ndarray,
 
 
 @_jit
-def scan_log_likelihood(padded: FloatArray, pad: int, offsets: np.ndarray, bins: int,
-                        rows: int, cols: int, out: FloatArray) -> None:
-    """out[k, i, j] = sum_b padded[pad + i + dr[k, b], pad + j + dc[k, b]]."""
+def scan_log_likelihood(padded: FloatArray, pad_rows: int, pad_cols: int, offsets: np.ndarray,
+                        bins: int, rows: int, cols: int, out: FloatArray) -> None:
+    """out[k, i, j] = sum_b padded[pad_rows + i + dr[k, b], pad_cols + j + dc[k, b]].
+
+    Unchecked: the caller (steps.py) pads by more than every |dr| and |dc|."""
     beams = offsets.shape[1]
     for k in range(bins):
         for i in range(rows):
             target = out[k, i]
             target[:] = 0.0
             for b in range(beams):
-                start = pad + offsets[k, b, 1]
-                segment = padded[pad + i + offsets[k, b, 0], start:start + cols]
+                start = pad_cols + offsets[k, b, 1]
+                segment = padded[pad_rows + i + offsets[k, b, 0], start:start + cols]
                 for j in range(cols):
                     target[j] += segment[j]
 
@@ -156,4 +167,4 @@ def warm_up() -> None:
     blur_rows(belief, taps, out)
     blur_cols_masked(belief, taps, np.ones((3, 3), dtype=np.bool_), out)
     offsets = np.zeros((2, 1, 2), dtype=np.int64)
-    scan_log_likelihood(np.zeros((5, 5)), 1, offsets, 2, 3, 3, out)
+    scan_log_likelihood(np.zeros((5, 5)), 1, 1, offsets, 2, 3, 3, out)

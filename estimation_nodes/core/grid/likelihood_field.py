@@ -14,9 +14,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation_nodes.core.errors import MapError
+from estimation_nodes.core.errors import InvalidInputError, MapError
 from estimation_nodes.core.grid.occupancy import FREE, OCCUPIED, OccupancyMap
 from estimation_nodes.core.grid.steps import GridModel
+from estimation_nodes.core.validation import (
+    as_real_array,
+    check_integer,
+    check_non_negative,
+    check_positive,
+)
 
 
 @dataclass(frozen=True)
@@ -29,10 +35,27 @@ class SensorField:
     max_range: float
     max_distance: float
 
+    def __post_init__(self) -> None:
+        for name in ("z_hit", "z_rand"):
+            object.__setattr__(self, name, check_non_negative(name, getattr(self, name)))
+        for name in ("sigma_hit", "max_range", "max_distance"):
+            object.__setattr__(self, name, check_positive(name, getattr(self, name)))
+        if not self.z_hit + self.z_rand > 0:
+            raise InvalidInputError("z_hit, z_rand: expected at least one > 0, got two 0s")
+
 
 def grid_model(occupancy: OccupancyMap, resolution: float, heading_bins: int,
                sensor: SensorField, max_states: int) -> GridModel:
     """The localizer's state grid and likelihood field for ``occupancy``."""
+    if not isinstance(occupancy, OccupancyMap) or not isinstance(sensor, SensorField):
+        raise MapError(f"occupancy, sensor: expected an OccupancyMap and a SensorField, got "
+                       f"{type(occupancy).__name__} and {type(sensor).__name__}")
+    try:
+        resolution = check_positive("resolution", resolution)
+        heading_bins = check_integer("heading_bins", heading_bins)
+        max_states = check_integer("max_states", max_states)
+    except InvalidInputError as error:
+        raise MapError(str(error)) from None
     factor = resolution / occupancy.resolution
     if abs(factor - round(factor)) > 1e-6 or round(factor) < 1:
         raise MapError(f"resolution: expected a whole multiple of the map's "
@@ -62,7 +85,11 @@ def grid_model(occupancy: OccupancyMap, resolution: float, heading_bins: int,
 def log_field(distance: np.ndarray, sensor: SensorField) -> np.ndarray:
     """log(z_hit exp(-d^2 / 2 sigma^2) + z_rand / max_range): a beam ending ``distance``
     from the nearest obstacle (AMCL's likelihood field)."""
-    hit = sensor.z_hit * np.exp(-0.5 * (distance / sensor.sigma_hit) ** 2)
+    distance = as_real_array("distance", distance)
+    if not np.all(distance >= 0):   # NaN fails too
+        raise InvalidInputError("distance: expected distances >= 0 (inf: no obstacle)")
+    with np.errstate(over="ignore"):   # a huge distance is exp(-inf) = 0: no hit
+        hit = sensor.z_hit * np.exp(-0.5 * (distance / sensor.sigma_hit) ** 2)
     return np.log(hit + sensor.z_rand / sensor.max_range)
 
 

@@ -12,7 +12,12 @@ only once the robot moved ``update_min_d`` or turned ``update_min_a`` since
 then; the first scan corrects at once. An odometry step longer than
 ``max_odom_jump`` is a jump (a reset odometry, a teleport): it is not taken
 as motion, and odometry is followed from the new pose. A step that fails
-(a scan every state rules out) leaves everything as it was.
+(a scan every state rules out, an argument refused) leaves everything as it was.
+
+Each method checks what it is given (a pose of three finite numbers, a scan of
+readings as ``steps.check_scan`` says, a stamp that is an integer) and raises
+``InvalidInputError`` naming it; the belief it holds is its own, so the steps
+on it are not checked again.
 """
 
 from __future__ import annotations
@@ -24,8 +29,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from estimation_nodes.core.errors import InvalidInputError
 from estimation_nodes.core.grid import steps as grid
-from estimation_nodes.core.validation import FloatArray
+from estimation_nodes.core.validation import (
+    FloatArray,
+    check_integer,
+    check_non_negative,
+    short,
+)
 
 Pose = tuple[float, float, float]
 #: Odometry poses kept to find the one of a scan's time (at 50 Hz, 4 s).
@@ -48,6 +59,18 @@ class GridLocalization:
     def __init__(self, model: grid.GridModel, noise: grid.OdometryNoise, update_min_d: float,
                  update_min_a: float, max_odom_jump: float,
                  kidnap_probability: float = 0.0) -> None:
+        if not isinstance(model, grid.GridModel):
+            raise InvalidInputError(f"model: expected a GridModel, got {type(model).__name__}")
+        if not isinstance(noise, grid.OdometryNoise):
+            raise InvalidInputError(
+                f"noise: expected an OdometryNoise, got {type(noise).__name__}")
+        update_min_d = check_non_negative("update_min_d", update_min_d)
+        update_min_a = check_non_negative("update_min_a", update_min_a)
+        max_odom_jump = _at_least_zero("max_odom_jump", max_odom_jump)
+        kidnap_probability = check_non_negative("kidnap_probability", kidnap_probability)
+        if kidnap_probability > 1.0:
+            raise InvalidInputError(
+                f"kidnap_probability: expected a probability in [0, 1], got {kidnap_probability}")
         self.model = model
         self.noise = noise
         # Load a large grid's compiled kernels now, not during the first scan.
@@ -71,10 +94,13 @@ class GridLocalization:
 
     def set_prior(self, pose: Pose, covariance: FloatArray) -> None:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
-        self.belief = grid.gaussian_prior(self.model, *pose, covariance)
+        x, y, yaw = grid.check_pose("pose", pose)
+        self.belief = grid.gaussian_prior(self.model, x, y, yaw, covariance)
 
     def on_odometry(self, pose: Pose, stamp_ns: int | None = None) -> bool:
         """Follow odometry; False when the step was a jump (not taken as motion)."""
+        pose = grid.check_pose("pose", pose)
+        stamp_ns = _stamp(stamp_ns)
         latest = self._latest
         if latest is not None and math.hypot(pose[0] - latest[0],
                                              pose[1] - latest[1]) > self._max_jump:
@@ -95,6 +121,7 @@ class GridLocalization:
 
     def odometry_covers(self, stamp_ns: int) -> bool:
         """Whether odometry up to ``stamp_ns`` (a scan's time) has come in."""
+        stamp_ns = check_integer("stamp_ns", stamp_ns)
         return bool(self._history) and self._history[-1][0] >= stamp_ns
 
     def _odometry_at(self, stamp_ns: int | None) -> Pose | None:
@@ -107,7 +134,7 @@ class GridLocalization:
     def due(self, stamp_ns: int | None = None) -> bool:
         """Whether a scan taken at ``stamp_ns`` updates the filter: the first once odometry
         is there, later ones after enough motion since the last update."""
-        pose = self._odometry_at(stamp_ns)
+        pose = self._odometry_at(_stamp(stamp_ns))
         if pose is None:
             return False
         if self._reference is None:
@@ -120,30 +147,51 @@ class GridLocalization:
     def update(self, ranges: FloatArray, angles: FloatArray,
                stamp_ns: int | None = None) -> None:
         """Predict with the odometry from the last update to the scan's time, correct with
-        the scan."""
-        pose = self._odometry_at(stamp_ns)
+        the scan: the beams to score, without the readings of no return (see
+        ``steps.check_scan``: a NaN, infinite or negative range is refused)."""
+        ranges, angles = grid.check_scan(ranges, angles)
+        pose = self._odometry_at(_stamp(stamp_ns))
         if pose is None:
-            raise ValueError("no odometry yet: the motion since the last update is unknown")
+            raise InvalidInputError(
+                "stamp_ns: no odometry yet: the motion since the last update is unknown")
         belief = self.belief
         if self._reference is not None:
             delta = grid.odometry_delta(self._reference, pose)
-            belief = grid.predict(belief, self.model, delta, self.noise)
+            belief = grid._predict(belief, self.model, delta, self.noise)
         if self._uniform is not None:
             # The robot may have been carried anywhere: a little of the belief everywhere,
             # so a kidnapped robot is found again by the scans alone.
             belief = (1.0 - self._kidnap) * belief + self._kidnap * self._uniform
-        self.belief, self.log_evidence = grid.correct_scan(belief, self.model, ranges, angles)
+        self.belief, self.log_evidence = grid._correct_scan(belief, self.model, ranges, angles)
         self._reference = pose
         self.updates += 1
 
     def estimate(self, radius: float, angle: float) -> Estimate:
-        state = grid.most_likely_state(self.belief)
-        pose = grid.pose_of(self.model, state)
-        return Estimate(pose, grid.covariance_around(self.belief, self.model, pose),
-                        grid.mass_near(self.belief, self.model, pose, radius, angle))
+        """The most likely pose, the covariance around it, and the probability within
+        ``radius`` (m) and ``angle`` (rad) of it."""
+        radius, angle = check_non_negative("radius", radius), check_non_negative("angle", angle)
+        state = grid._most_likely_state(self.belief)
+        pose = grid._pose_of(self.model, state)
+        return Estimate(pose, grid._covariance_around(self.belief, self.model, pose),
+                        grid._mass_near(self.belief, self.model, pose, radius, angle))
 
     def belief_map(self) -> np.ndarray:
-        return grid.belief_map(self.belief)
+        return grid._belief_map(self.belief)
 
     def entropy_bits(self) -> float:
-        return grid.entropy_bits(self.belief)
+        return grid._entropy_bits(self.belief)
+
+
+def _stamp(stamp_ns: int | None) -> int | None:
+    return None if stamp_ns is None else check_integer("stamp_ns", stamp_ns)
+
+
+def _at_least_zero(name: str, value: float) -> float:
+    """A number >= 0, inf included (never, for a threshold)."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if not number >= 0.0 or isinstance(value, (str, bytes)):
+        raise InvalidInputError(f"{name}: expected a number >= 0, got {short(value)}")
+    return number

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation_nodes.core.errors import MapError
+from estimation_nodes.core.errors import InvalidInputError, MapError
+from estimation_nodes.core.validation import check_positive
 
 #: OccupancyGrid cell values (nav_msgs): free, occupied, unknown.
 FREE, OCCUPIED, UNKNOWN = 0, 100, -1
@@ -24,9 +25,22 @@ class OccupancyMap:
     origin: tuple[float, float]
 
     def __post_init__(self) -> None:
-        if self.cells.ndim != 2 or 0 in self.cells.shape:
-            raise MapError(f"map: expected a 2-D grid of cells, got shape {self.cells.shape}")
-        if not (math.isfinite(self.resolution) and self.resolution > 0):
-            raise MapError(f"resolution: expected a finite value > 0, got {self.resolution}")
-        if not all(math.isfinite(v) for v in self.origin):
-            raise MapError(f"origin: expected finite x and y, got {list(self.origin)}")
+        cells = np.asarray(self.cells) if isinstance(self.cells, (np.ndarray, list)) else None
+        if cells is None or cells.dtype.kind not in "iu":
+            raise MapError(f"map: expected a 2-D grid of integer cells, got {self.cells!r:.80}")
+        if cells.ndim != 2 or 0 in cells.shape:
+            raise MapError(f"map: expected a 2-D grid of cells, got shape {cells.shape}")
+        try:
+            resolution = check_positive("resolution", self.resolution)
+        except InvalidInputError:
+            raise MapError(f"resolution: expected a finite value > 0, got {self.resolution!r}") \
+                from None
+        try:
+            origin = tuple(float(v) for v in self.origin)
+        except (TypeError, ValueError):
+            origin = ()
+        if len(origin) != 2 or not all(math.isfinite(v) for v in origin):
+            raise MapError(f"origin: expected finite x and y, got {self.origin!r}")
+        object.__setattr__(self, "cells", cells)
+        object.__setattr__(self, "resolution", resolution)
+        object.__setattr__(self, "origin", origin)

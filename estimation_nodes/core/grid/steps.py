@@ -18,6 +18,14 @@ with the odometry motion model (5.4) and the likelihood-field sensor model
   over one heading layer is a shifted view of the log likelihood field.
 - ``correct``: posterior and log evidence, as the 1-D filter's ``correct``.
 
+Every public function checks its arguments and raises ``InvalidInputError``
+(core/errors.py) naming the one that is wrong: a belief of another shape than
+the model's or with values outside [0, 1], a number that is NaN or infinite,
+a scan with a range that is no reading (see ``check_scan``). Results are finite.
+The checks of a belief are two numpy reductions; the running localizer
+(localization.py) checks its new inputs once and calls the unchecked steps
+(underscored here) on the belief it holds.
+
 The map's rotation (an OccupancyGrid origin with yaw) is not supported here:
 the state grid refuses it (core/grid/likelihood_field.py).
 """
@@ -25,19 +33,47 @@ the state grid refuses it (core/grid/likelihood_field.py).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from types import ModuleType
+from typing import Any
 
 import numpy as np
 
 from estimation_nodes.core.compiled_loader import load_kernels
-from estimation_nodes.core.errors import ZeroEvidenceError
-from estimation_nodes.core.validation import FloatArray
+from estimation_nodes.core.errors import (
+    InputSizeError,
+    InvalidInputError,
+    NonFiniteResultError,
+    ZeroEvidenceError,
+)
+from estimation_nodes.core.validation import (
+    FloatArray,
+    as_real_array,
+    check_covariance,
+    check_finite,
+    check_integer,
+    check_non_negative,
+    check_positive,
+    check_probabilities,
+    short,
+)
 
 TWO_PI = 2.0 * math.pi
-#: Beliefs of at least this many states take the compiled kernels (core/compiled_grid.py)
+#: Beliefs of at least this many states take the compiled kernels (grid/compiled.py)
 #: when numba imports; smaller ones never import it.
 COMPILED_MIN_STATES = 100_000
+#: The widest Gaussian kernel listed tap by tap (``gaussian_taps``), in taps either side.
+#: A blur along x or y never needs more taps than the axis has cells, nor one over the
+#: headings more than the headings (see ``_reaching_taps`` and ``_heading_taps``).
+MAX_TAPS_HALF_WIDTH = 1 << 20
+#: How far (m) a map may reach from (0, 0): squares of distances on it stay finite.
+MAX_MAP_EXTENT = 1e150
+#: A scan's sum of log likelihoods stays within this (beams x the largest |log likelihood|
+#: of the model), so it never overflows.
+LOG_SUM_LIMIT = 1e300
+
+Pose = tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -56,21 +92,35 @@ class GridModel:
     resolution: float
     origin: tuple[float, float]
     heading_bins: int
+    #: The largest |log likelihood| one beam can score (in the field or outside it).
+    log_bound: float = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if self.free.ndim != 2 or self.free.shape != self.log_field.shape:
-            raise ValueError(f"free and log_field: expected two arrays of one (H, W) shape, "
-                             f"got {self.free.shape} and {self.log_field.shape}")
-        if not self.free.any():
-            raise ValueError("free: the map has no free cell")
-        if not (self.resolution > 0 and math.isfinite(self.resolution)):
-            raise ValueError(f"resolution: expected a finite value > 0, got {self.resolution}")
-        if not all(math.isfinite(v) for v in self.origin):
-            raise ValueError(f"origin: expected finite x and y, got {self.origin}")
-        if self.heading_bins < 1:
-            raise ValueError(f"heading_bins: expected >= 1, got {self.heading_bins}")
-        if not (np.isfinite(self.log_field).all() and math.isfinite(self.log_outside)):
-            raise ValueError("log_field: expected finite log likelihoods")
+        free = _booleans("free", self.free)
+        log_field = as_real_array("log_field", self.log_field)
+        if free.ndim != 2 or free.shape != log_field.shape:
+            raise InputSizeError(f"free and log_field: expected two arrays of one (H, W) "
+                                 f"shape, got {free.shape} and {log_field.shape}")
+        if not free.any():
+            raise InvalidInputError("free: the map has no free cell")
+        resolution = check_positive("resolution", self.resolution)
+        origin = _numbers("origin", self.origin, ("x", "y"))
+        heading_bins = check_integer("heading_bins", self.heading_bins)
+        if heading_bins < 1:
+            raise InvalidInputError(f"heading_bins: expected >= 1, got {heading_bins}")
+        if not np.isfinite(log_field).all():
+            raise InvalidInputError("log_field: expected finite log likelihoods")
+        log_outside = check_finite("log_outside", self.log_outside)
+        if not resolution * max(free.shape) + max(map(abs, origin)) < MAX_MAP_EXTENT:
+            raise InvalidInputError(
+                f"resolution, origin: a map of {free.shape[1]} x {free.shape[0]} cells of "
+                f"{resolution:g} m at {origin} reaches past {MAX_MAP_EXTENT:g} m")
+        for name, value in (("free", free), ("log_field", log_field), ("log_outside", log_outside),
+                            ("resolution", resolution), ("origin", origin),
+                            ("heading_bins", heading_bins)):
+            object.__setattr__(self, name, value)
+        object.__setattr__(self, "log_bound",
+                           max(float(np.abs(log_field).max()), abs(log_outside)))
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -113,12 +163,131 @@ class OdometryNoise:
     def __post_init__(self) -> None:
         for name in ("alpha1", "alpha2", "alpha3", "alpha4", "floor_m", "floor_rad"):
             value = getattr(self, name)
-            if not (value >= 0 and math.isfinite(value)):
-                raise ValueError(f"{name}: expected a finite value >= 0, got {value}")
+            try:
+                number = check_non_negative(name, value)
+            except InvalidInputError:
+                raise InvalidInputError(
+                    f"{name}: expected a finite value >= 0, got {short(value)}") from None
+            object.__setattr__(self, name, number)
+
+
+# --- argument checks -----------------------------------------------------------------------
+
+
+def _numbers(name: str, value: Any, parts: tuple[str, ...]) -> tuple[float, ...]:
+    """``value`` as len(parts) finite floats (a pose, an origin), or InvalidInputError."""
+    try:
+        numbers = tuple(float(v) for v in value)
+    except (TypeError, ValueError):
+        numbers = ()
+    if len(numbers) != len(parts) or not all(map(math.isfinite, numbers)) \
+            or isinstance(value, (str, bytes)):
+        raise InvalidInputError(
+            f"{name}: expected finite numbers ({', '.join(parts)}), got {short(value)}")
+    return numbers
+
+
+def _booleans(name: str, value: Any) -> np.ndarray:
+    """``value`` as a bool array, the caller's own when it is one (no 0/1 numbers: ``~``
+    of those is no mask)."""
+    try:
+        array = np.asarray(value)
+    except (TypeError, ValueError):
+        array = np.zeros(0)
+    if array.dtype != np.bool_:
+        raise InvalidInputError(f"{name}: expected an (H, W) array of booleans, got "
+                                f"{short(value)}")
+    return array
+
+
+def check_pose(name: str, value: Any) -> Pose:
+    """``value`` as a pose (x, y, yaw) of three finite floats."""
+    x, y, yaw = _numbers(name, value, ("x", "y", "yaw"))
+    return x, y, yaw
+
+
+def _check_model(model: Any) -> GridModel:
+    if not isinstance(model, GridModel):
+        raise InvalidInputError(f"model: expected a GridModel, got {type(model).__name__}")
+    return model
+
+
+def check_belief(belief: Any, model: GridModel) -> FloatArray:
+    """``belief`` as a C-contiguous float array of the model's (K, H, W) shape, values in
+    [0, 1] (not necessarily summing to 1); the caller's own array when it is one."""
+    return check_probabilities("belief", belief, model.shape)
+
+
+def _any_belief(belief: Any, ndim: int | None = 3) -> FloatArray:
+    """A belief of ``ndim`` dimensions (any, for None) of values in [0, 1]."""
+    array = as_real_array("belief", belief)
+    if ndim is not None and array.ndim != ndim:
+        raise InputSizeError(f"belief: expected a {ndim}-dimensional array, got shape "
+                             f"{array.shape}")
+    return check_probabilities("belief", array, array.shape)
+
+
+def check_delta(delta: Any) -> tuple[float, float, float]:
+    """(rot1, trans, rot2) of an odometry motion (Table 5.6, as ``odometry_delta`` gives
+    it): finite, rot1 and rot2 in [-pi, pi], trans >= 0."""
+    rot1, trans, rot2 = _numbers("delta", delta, ("rot1", "trans", "rot2"))
+    if not (abs(rot1) <= math.pi and abs(rot2) <= math.pi and trans >= 0.0):
+        raise InvalidInputError(f"delta: expected (rot1, trans, rot2) with rot1 and rot2 in "
+                                f"[-pi, pi] and trans >= 0, got {short(delta)}")
+    return rot1, trans, rot2
+
+
+def check_scan(ranges: Any, angles: Any) -> tuple[FloatArray, FloatArray]:
+    """The beams of a scan to score, checked: (ranges, angles), one angle (rad, from the
+    robot's heading) per range (m), as float arrays.
+
+    Every range given is scored as a reading that hit something at that distance. A
+    laser's "no return" is not such a reading: REP 117's +inf (nothing within
+    range_max), -inf (closer than range_min) and NaN (no valid measurement), a negative
+    value, and a reading at or beyond the sensor's range_max (which the core does not
+    know). The caller leaves those beams out first, as the nodes' ``scan_beams``
+    (nodes/grid_messages.py) does; given one anyway, a NaN, infinite or negative range
+    is refused (``InvalidInputError`` naming ``ranges`` and the beam) rather than
+    silently dropped, so a caller that forgot to select its beams learns it at once
+    instead of scoring fewer beams than it thinks. A finite range longer than the map
+    ends off the map from every state cell (``log_outside``); the work and the memory
+    do not grow with it. No beams at all are a scan that says nothing: the correction
+    leaves the belief as it was.
+    """
+    r = as_real_array("ranges", ranges)
+    a = as_real_array("angles", angles)
+    if r.ndim != 1 or a.ndim != 1:
+        raise InputSizeError(f"ranges and angles: expected two lists of numbers, got shapes "
+                             f"{r.shape} and {a.shape}")
+    if r.size != a.size:
+        raise InputSizeError(f"ranges and angles: expected one angle per range, got "
+                             f"{r.size} ranges and {a.size} angles")
+    if r.size and not (r.min() >= 0.0 and r.max() < math.inf):   # NaN fails both
+        beam = int(np.flatnonzero(~(r >= 0.0) | ~(r < math.inf))[0])
+        raise InvalidInputError(
+            f"ranges: expected finite readings >= 0, got {float(r[beam])!r} at beam {beam} "
+            f"(leave out the beams of no return: NaN, inf, negative, at or beyond range_max)")
+    if a.size and not np.isfinite(a).all():
+        beam = int(np.flatnonzero(~np.isfinite(a))[0])
+        raise InvalidInputError(
+            f"angles: expected finite numbers, got {float(a[beam])!r} at beam {beam}")
+    return r, a
+
+
+def _covariance_3x3(covariance: Any) -> FloatArray:
+    """A 3 x 3 covariance over (x, y, yaw), given as 3 x 3 or as 9 values (row-major)."""
+    matrix = as_real_array("covariance", covariance)
+    if matrix.size == 9:
+        matrix = matrix.reshape(3, 3)
+    return check_covariance("covariance", matrix, 3)
+
+
+# --- models and priors ---------------------------------------------------------------------
 
 
 def uniform_over_free(model: GridModel) -> FloatArray:
     """Not knowing where the robot is: equal probability on every free cell and heading."""
+    _check_model(model)
     layer = model.free.astype(np.float64)
     belief = np.broadcast_to(layer, model.shape).copy()
     return belief / belief.sum()
@@ -128,18 +297,31 @@ def gaussian_prior(model: GridModel, x: float, y: float, yaw: float,
                    covariance: FloatArray) -> FloatArray:
     """A prior from a pose and its 3 x 3 covariance over (x, y, yaw), as RViz's "2D Pose
     Estimate" sends one, restricted to free cells; never all zero (the nearest free
-    state takes the mass when the Gaussian covers none)."""
-    cov = np.asarray(covariance, dtype=np.float64).reshape(3, 3)
+    state takes the mass when the Gaussian covers none). A pose so far from the map that
+    its distance to it overflows is refused (``NonFiniteResultError``)."""
+    _check_model(model)
+    x, y, yaw = check_pose("pose", (x, y, yaw))
+    cov = _covariance_3x3(covariance)
     floor = np.diag([(model.resolution / 2) ** 2] * 2 + [(model.bin_width / 2) ** 2])
-    information = np.linalg.inv(cov + floor)
+    try:
+        information = np.linalg.inv(cov + floor)
+    except np.linalg.LinAlgError:
+        raise InvalidInputError(f"covariance: singular to rounding once the grid's own "
+                                f"spread is added: {short(cov)}") from None
     xs, ys = model.cell_centres()
-    dx = xs[None, None, :] - x
-    dy = ys[None, :, None] - y
-    dyaw = _wrap(model.headings() - yaw)[:, None, None]
-    exponent = (information[0, 0] * dx * dx + information[1, 1] * dy * dy
-                + information[2, 2] * dyaw * dyaw + 2 * information[0, 1] * dx * dy
-                + 2 * information[0, 2] * dx * dyaw + 2 * information[1, 2] * dy * dyaw)
-    belief = np.exp(-0.5 * (exponent - exponent.min())) * model.free[None, :, :]
+    with np.errstate(over="ignore", invalid="ignore"):
+        dx = xs[None, None, :] - x
+        dy = ys[None, :, None] - y
+        dyaw = _wrap(model.headings() - yaw)[:, None, None]
+        exponent = (information[0, 0] * dx * dx + information[1, 1] * dy * dy
+                    + information[2, 2] * dyaw * dyaw + 2 * information[0, 1] * dx * dy
+                    + 2 * information[0, 2] * dx * dyaw + 2 * information[1, 2] * dy * dyaw)
+        lowest = exponent.min()
+    if not math.isfinite(lowest):   # NaN or inf anywhere: min is NaN, or inf everywhere
+        raise NonFiniteResultError(f"x, y, covariance: the pose ({x:g}, {y:g}) is too far "
+                                   f"from the map (or the covariance too extreme) for a "
+                                   f"finite prior")
+    belief = np.exp(-0.5 * (exponent - lowest)) * model.free[None, :, :]
     total = belief.sum()
     if not total > 0:
         belief = np.zeros(model.shape)
@@ -153,12 +335,22 @@ def gaussian_prior(model: GridModel, x: float, y: float, yaw: float,
 def odometry_delta(previous: tuple[float, float, float],
                    current: tuple[float, float, float]) -> tuple[float, float, float]:
     """(rot1, trans, rot2) between two odometry poses (x, y, yaw): Probabilistic
-    Robotics Table 5.6. A turn on the spot is all rot1."""
+    Robotics Table 5.6. A turn on the spot is all rot1. Poses so far apart that their
+    difference overflows are refused (``NonFiniteResultError``)."""
+    previous = check_pose("previous", previous)
+    current = check_pose("current", current)
     dx, dy = current[0] - previous[0], current[1] - previous[1]
+    turn = current[2] - previous[2]
+    if not (math.isfinite(dx) and math.isfinite(dy) and math.isfinite(turn)):
+        raise NonFiniteResultError("previous, current: their difference overflows: "
+                                   f"{current} and {previous}")
     trans = math.hypot(dx, dy)
     rot1 = _wrap_scalar(math.atan2(dy, dx) - previous[2]) if trans > 1e-9 else 0.0
-    rot2 = _wrap_scalar(current[2] - previous[2] - rot1)
+    rot2 = _wrap_scalar(turn - rot1)
     return rot1, trans, rot2
+
+
+# --- prediction ----------------------------------------------------------------------------
 
 
 def _compiled_kernels() -> ModuleType | None:
@@ -173,6 +365,18 @@ def compiled_kernels(states: int, allowed: bool = True) -> ModuleType | None:
 def motion_noise(delta: tuple[float, float, float], noise: OdometryNoise,
                  model: GridModel) -> tuple[float, float]:
     """The spread of a motion: std in cells (x and y) and in heading bins."""
+    if not isinstance(noise, OdometryNoise):
+        raise InvalidInputError(f"noise: expected an OdometryNoise, got {type(noise).__name__}")
+    sigma_cells, sigma_bins = _motion_noise(check_delta(delta), noise, _check_model(model))
+    if not (math.isfinite(sigma_cells) and math.isfinite(sigma_bins)):
+        raise NonFiniteResultError(f"delta, noise: the spread of {delta} overflows")
+    return sigma_cells, sigma_bins
+
+
+def _motion_noise(delta: tuple[float, float, float], noise: OdometryNoise,
+                  model: GridModel) -> tuple[float, float]:
+    """``motion_noise``: inf when the motion is so extreme that it overflows (the blurs
+    take an infinite sigma as an even spread)."""
     rot1, trans, rot2 = delta
     sigma_m = noise.floor_m + noise.alpha3 * trans + noise.alpha4 * (abs(rot1) + abs(rot2))
     sigma_rad = noise.floor_rad + noise.alpha1 * (abs(rot1) + abs(rot2)) + noise.alpha2 * trans
@@ -181,27 +385,63 @@ def motion_noise(delta: tuple[float, float, float], noise: OdometryNoise,
 
 def layer_shifts(model: GridModel, rot1: float, trans: float) -> tuple[FloatArray, FloatArray]:
     """How far (rows, columns) each heading layer moves: the displacement seen from it."""
+    _check_model(model)
+    rot1, trans = check_finite("rot1", rot1), check_finite("trans", trans)
+    shift_rows, shift_cols = _layer_shifts(model, rot1, trans)
+    if not (np.isfinite(shift_rows).all() and np.isfinite(shift_cols).all()):
+        raise NonFiniteResultError(f"trans: {trans:g} m overflows in cells of "
+                                   f"{model.resolution:g} m")
+    return shift_rows, shift_cols
+
+
+def _layer_shifts(model: GridModel, rot1: float, trans: float) -> tuple[FloatArray, FloatArray]:
     angles = model.headings() + rot1
-    return (trans * np.sin(angles) / model.resolution,
-            trans * np.cos(angles) / model.resolution)
+    with np.errstate(over="ignore"):
+        return (trans * np.sin(angles) / model.resolution,
+                trans * np.cos(angles) / model.resolution)
+
+
+def _bounded_shifts(model: GridModel, rot1: float,
+                    trans: float) -> tuple[FloatArray, FloatArray]:
+    """``layer_shifts`` cut to the grid's size plus one cell: a shift that long already
+    moves every cell off the grid, so the result is the same (all lost), and the kernels
+    take whole cells as exact int64s."""
+    rows, cols = model.free.shape
+    shift_rows, shift_cols = _layer_shifts(model, rot1, trans)
+    return (np.clip(shift_rows, -(rows + 1), rows + 1),
+            np.clip(shift_cols, -(cols + 1), cols + 1))
 
 
 def predict(belief: FloatArray, model: GridModel, delta: tuple[float, float, float],
             noise: OdometryNoise, compiled: bool = True) -> FloatArray:
-    """The belief after a motion (rot1, trans, rot2) measured by odometry."""
+    """The belief after a motion (rot1, trans, rot2) measured by odometry (``check_delta``).
+
+    A motion that moves all the belief off the free cells (a long one, off the map) is
+    refused with ``ZeroEvidenceError`` naming ``delta``.
+    """
+    _check_model(model)
+    if not isinstance(noise, OdometryNoise):
+        raise InvalidInputError(f"noise: expected an OdometryNoise, got {type(noise).__name__}")
+    return _predict(check_belief(belief, model), model, check_delta(delta), noise, compiled)
+
+
+def _predict(belief: FloatArray, model: GridModel, delta: tuple[float, float, float],
+             noise: OdometryNoise, compiled: bool = True) -> FloatArray:
+    """``predict`` of arguments already checked."""
     kernels = compiled_kernels(belief.size, compiled)
     if kernels is not None:
         return _predict_compiled(kernels, belief, model, delta, noise)
     rot1, trans, rot2 = delta
-    shift_rows, shift_cols = layer_shifts(model, rot1, trans)
+    shift_rows, shift_cols = _bounded_shifts(model, rot1, trans)
     shifted = np.empty_like(belief)
     for k in range(model.heading_bins):
         shifted[k] = _shift_bilinear(belief[k], shift_cols[k], shift_rows[k])
     turned = _shift_headings(shifted, (rot1 + rot2) / model.bin_width)
-    sigma_cells, sigma_bins = motion_noise(delta, noise, model)
-    spread = _blur_cyclic(turned, sigma_bins, axis=0)
-    spread = _blur(spread, sigma_cells, axis=1)
-    spread = _blur(spread, sigma_cells, axis=2)
+    sigma_cells, sigma_bins = _motion_noise(delta, noise, model)
+    rows, cols = model.free.shape
+    spread = _blur_cyclic(turned, _heading_taps(sigma_bins, model.heading_bins), axis=0)
+    spread = _blur(spread, _reaching_taps(sigma_cells, rows), axis=1)
+    spread = _blur(spread, _reaching_taps(sigma_cells, cols), axis=2)
     spread *= model.free[None, :, :]
     return _normalized(spread, float(spread.sum()))
 
@@ -209,66 +449,96 @@ def predict(belief: FloatArray, model: GridModel, delta: tuple[float, float, flo
 def _predict_compiled(kernels: ModuleType, belief: FloatArray, model: GridModel,
                       delta: tuple[float, float, float], noise: OdometryNoise) -> FloatArray:
     rot1, trans, rot2 = delta
-    shift_rows, shift_cols = layer_shifts(model, rot1, trans)
-    sigma_cells, sigma_bins = motion_noise(delta, noise, model)
+    shift_rows, shift_cols = _bounded_shifts(model, rot1, trans)
+    sigma_cells, sigma_bins = _motion_noise(delta, noise, model)
+    rows, cols = model.free.shape
     first, second = np.empty_like(belief), np.empty_like(belief)
     kernels.shift_motion(belief, shift_rows, shift_cols, (rot1 + rot2) / model.bin_width, first)
-    taps = gaussian_taps(sigma_bins)
-    if taps.size > 1:
+    taps = _heading_taps(sigma_bins, model.heading_bins)
+    if not _identity(taps):
         kernels.blur_headings(first, taps, second)
         first, second = second, first
-    taps = gaussian_taps(sigma_cells)
-    if taps.size > 1:
+    taps = _reaching_taps(sigma_cells, rows)
+    if not _identity(taps):
         kernels.blur_rows(first, taps, second)
         first, second = second, first
-    total = kernels.blur_cols_masked(first, taps, model.free, second)
+    total = kernels.blur_cols_masked(first, _reaching_taps(sigma_cells, cols), model.free,
+                                     second)
     return _normalized(second, total)
 
 
 def _normalized(belief: FloatArray, total: float) -> FloatArray:
     if not total > 0:
-        raise ZeroEvidenceError("the motion left no probability on a free cell")
+        raise ZeroEvidenceError("delta: the motion left no probability on a free cell")
     belief /= total
     return belief
+
+
+# --- correction ----------------------------------------------------------------------------
 
 
 def beam_endpoints(model: GridModel, ranges: FloatArray, angles: FloatArray) -> np.ndarray:
     """(K, beams, 2) integer (row, column) offsets of each beam's end point from the
     state cell, for each heading bin: the cell the end point falls in, measured from
-    the state cell's centre."""
-    theta = model.headings()[:, None] + np.asarray(angles, dtype=np.float64)[None, :]
-    r = np.asarray(ranges, dtype=np.float64)[None, :] / model.resolution
-    return np.stack([np.floor(0.5 + r * np.sin(theta)), np.floor(0.5 + r * np.cos(theta))],
-                    axis=-1).astype(np.int64)
+    the state cell's centre. Offsets are cut to the map's size (rows, columns): an end
+    point that far is off the map from every state cell, however far it is."""
+    return _beam_endpoints(_check_model(model), *check_scan(ranges, angles))
+
+
+def _beam_endpoints(model: GridModel, ranges: FloatArray, angles: FloatArray) -> np.ndarray:
+    rows, cols = model.free.shape
+    theta = model.headings()[:, None] + angles[None, :]
+    # A beam of rows + cols cells or more is longer than the map's diagonal: it ends off
+    # the map from every state cell, as it does at that length, which keeps the products
+    # finite (a range of 1e300 m in cells may overflow, and inf * sin(0) is NaN).
+    with np.errstate(over="ignore"):
+        r = np.minimum(ranges[None, :] / model.resolution, float(rows + cols))
+    ends = np.stack([np.clip(np.floor(0.5 + r * np.sin(theta)), -rows, rows),
+                     np.clip(np.floor(0.5 + r * np.cos(theta)), -cols, cols)], axis=-1)
+    return ends.astype(np.int64)
 
 
 def scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
                         compiled: bool = True) -> FloatArray:
     """Sum over the beams of log p(beam | state), for every state: (K, H, W).
 
-    ``ranges`` and ``angles`` are the beams to use (already without max-range
-    readings, which the likelihood-field model does not score).
+    ``ranges`` and ``angles`` are the beams to use, without the readings of no return
+    (``check_scan`` says which and what happens to them).
     """
-    offsets = beam_endpoints(model, ranges, angles)
+    _check_model(model)
+    return _scan_log_likelihood(model, *check_scan(ranges, angles), compiled)
+
+
+def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
+                         compiled: bool = True) -> FloatArray:
+    if ranges.size * model.log_bound > LOG_SUM_LIMIT:
+        raise InvalidInputError(f"ranges: {ranges.size} beams over log likelihoods as large "
+                                f"as {model.log_bound:g} would overflow their sum")
+    offsets = _beam_endpoints(model, ranges, angles)
     rows, cols = model.free.shape
-    padded, pad = _padded_field(model, offsets)
+    padded, pad_rows, pad_cols = _padded_field(model, offsets)
     kernels = compiled_kernels(int(np.prod(model.shape)), compiled)
     if kernels is not None:
         out = np.empty(model.shape)      # the kernel writes every element
-        kernels.scan_log_likelihood(padded, pad, offsets, model.heading_bins, rows, cols, out)
+        kernels.scan_log_likelihood(padded, pad_rows, pad_cols, offsets, model.heading_bins,
+                                    rows, cols, out)
         return out
     total = np.zeros(model.shape)
     for k in range(model.heading_bins):
         layer = total[k]
         for dr, dc in offsets[k]:
-            layer += padded[pad + dr:pad + dr + rows, pad + dc:pad + dc + cols]
+            layer += padded[pad_rows + dr:pad_rows + dr + rows, pad_cols + dc:pad_cols + dc + cols]
     return total
 
 
-def _padded_field(model: GridModel, offsets: np.ndarray) -> tuple[FloatArray, int]:
-    """The log field with a border of ``log_outside`` wide enough for every offset."""
-    pad = int(np.abs(offsets).max(initial=0)) + 1
-    return np.pad(model.log_field, pad, constant_values=model.log_outside), pad
+def _padded_field(model: GridModel, offsets: np.ndarray) -> tuple[FloatArray, int, int]:
+    """The log field with a border of ``log_outside`` wide enough for every offset: at
+    most (3 H + 2) x (3 W + 2) values, since the offsets are cut to the map's size."""
+    pad_rows = int(np.abs(offsets[..., 0]).max(initial=0)) + 1
+    pad_cols = int(np.abs(offsets[..., 1]).max(initial=0)) + 1
+    padded = np.pad(model.log_field, ((pad_rows, pad_rows), (pad_cols, pad_cols)),
+                    constant_values=model.log_outside)
+    return padded, pad_rows, pad_cols
 
 
 def correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angles: FloatArray,
@@ -276,35 +546,99 @@ def correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angle
     """``correct`` with a scan: posterior and log evidence. (A compiled kernel that also
     weighted each row as soon as its beams were summed measured slower: numba's scalar exp
     costs more than the pass numpy's vectorized one needs.)"""
-    return _correct_in(scan_log_likelihood(model, ranges, angles, compiled), belief)
+    _check_model(model)
+    belief = check_belief(belief, model)
+    ranges, angles = check_scan(ranges, angles)
+    return _correct_scan(belief, model, ranges, angles, compiled)
 
 
-def _correct_in(log_likelihood: FloatArray, belief: FloatArray) -> tuple[FloatArray, float]:
+def _correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angles: FloatArray,
+                  compiled: bool = True) -> tuple[FloatArray, float]:
+    return _correct_in(_scan_log_likelihood(model, ranges, angles, compiled), belief,
+                       lambda: _scan_log_likelihood(model, ranges, angles, compiled))
+
+
+def _correct_in(log_likelihood: FloatArray, belief: FloatArray,
+                again: Callable[[], FloatArray]) -> tuple[FloatArray, float]:
     """``correct``, the posterior written over ``log_likelihood`` (an array of ours): a
-    tensor of millions of states allocated anew costs more than the arithmetic."""
+    tensor of millions of states allocated anew costs more than the arithmetic.
+
+    The weights are taken relative to the largest log likelihood. When that is of a state
+    the belief rules out and so far above the others that every weight underflows, the
+    log likelihood is made ``again`` and weighed relative to the largest among the states
+    the belief allows: the evidence was not zero, only too small for that scale.
+    """
     peak = float(log_likelihood.max())
-    weighted = np.subtract(log_likelihood, peak, out=log_likelihood)
-    np.exp(weighted, out=weighted)
-    np.multiply(weighted, belief, out=weighted)
-    total = float(weighted.sum())
+    if not peak < math.inf:   # NaN anywhere makes the maximum NaN
+        raise InvalidInputError(f"log_likelihood: expected numbers below inf, got "
+                                f"{'NaN' if math.isnan(peak) else peak}")
+    if peak == -math.inf:
+        raise ZeroEvidenceError("every state rules the scan out (log likelihood -inf)")
+    weighted, total = _weighted(log_likelihood, peak, belief)
+    if not total > 0:
+        possible = belief > 0
+        if possible.any():
+            log_likelihood = again()
+            log_likelihood[~possible] = -math.inf   # exp(+huge) * 0 would be NaN
+            peak = float(log_likelihood.max())
+            if peak > -math.inf:
+                weighted, total = _weighted(log_likelihood, peak, belief)
     if not total > 0:
         raise ZeroEvidenceError("every state with probability rules the scan out")
     weighted /= total
     return weighted, peak + math.log(total)
 
 
+def _weighted(log_likelihood: FloatArray, peak: float,
+              belief: FloatArray) -> tuple[FloatArray, float]:
+    """belief * exp(log_likelihood - peak), written over log_likelihood, and its sum."""
+    weighted = np.subtract(log_likelihood, peak, out=log_likelihood)
+    np.exp(weighted, out=weighted)
+    np.multiply(weighted, belief, out=weighted)
+    return weighted, float(weighted.sum())
+
+
 def correct(belief: FloatArray, log_likelihood: FloatArray) -> tuple[FloatArray, float]:
-    """Posterior and log evidence log p(z) = log sum(belief * exp(log_likelihood))."""
-    return _correct_in(np.array(log_likelihood, dtype=np.float64), belief)
+    """Posterior and log evidence log p(z) = log sum(belief * exp(log_likelihood)).
+
+    ``log_likelihood`` of the belief's shape, below inf (-inf: that state is ruled out).
+    """
+    belief = _any_belief(belief, ndim=None)
+    given = as_real_array("log_likelihood", log_likelihood)
+    if given.shape != belief.shape:
+        raise InputSizeError(f"belief, log_likelihood: expected one shape, got "
+                             f"{belief.shape} and {given.shape}")
+    return _correct_in(np.array(given, dtype=np.float64), belief,
+                       lambda: np.array(given, dtype=np.float64))
+
+
+# --- what the belief says ------------------------------------------------------------------
 
 
 def most_likely_state(belief: FloatArray) -> tuple[int, int, int]:
+    return _most_likely_state(_any_belief(belief))
+
+
+def _most_likely_state(belief: FloatArray) -> tuple[int, int, int]:
     k, i, j = np.unravel_index(int(np.argmax(belief)), belief.shape)
     return int(k), int(i), int(j)
 
 
 def pose_of(model: GridModel, state: tuple[int, int, int]) -> tuple[float, float, float]:
     """(x, y, yaw) of a state cell's centre."""
+    _check_model(model)
+    try:
+        k, i, j = (check_integer("state", v) for v in state)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"state: expected (k, i, j) integers, got {short(state)}") \
+            from None
+    if not all(0 <= v < n for v, n in zip((k, i, j), model.shape)):
+        raise InvalidInputError(f"state: expected (k, i, j) within {model.shape}, got "
+                                f"{(k, i, j)}")
+    return _pose_of(model, (k, i, j))
+
+
+def _pose_of(model: GridModel, state: tuple[int, int, int]) -> tuple[float, float, float]:
     k, i, j = state
     xs, ys = model.cell_centres()
     return float(xs[j]), float(ys[i]), float(_wrap_scalar(k * model.bin_width))
@@ -314,6 +648,17 @@ def covariance_around(belief: FloatArray, model: GridModel,
                       pose: tuple[float, float, float]) -> FloatArray:
     """The 3 x 3 second moment of (x, y, yaw) about ``pose`` under the belief (yaw
     differences wrapped to (-pi, pi]), plus the grid's own quantization variance."""
+    _check_model(model)
+    pose = check_pose("pose", pose)
+    cov = _covariance_around(check_belief(belief, model), model, pose)
+    if not np.isfinite(cov).all():
+        raise NonFiniteResultError(f"pose: {pose} is too far from the map for a finite "
+                                   f"second moment")
+    return cov
+
+
+def _covariance_around(belief: FloatArray, model: GridModel,
+                       pose: tuple[float, float, float]) -> FloatArray:
     xs, ys = model.cell_centres()
     px = belief.sum(axis=(0, 1))
     py = belief.sum(axis=(0, 2))
@@ -322,12 +667,13 @@ def covariance_around(belief: FloatArray, model: GridModel,
     dyaw = _wrap(model.headings() - pose[2])
     pxy = belief.sum(axis=0)
     cov = np.empty((3, 3))
-    cov[0, 0] = px @ (dx * dx)
-    cov[1, 1] = py @ (dy * dy)
-    cov[2, 2] = pk @ (dyaw * dyaw)
-    cov[0, 1] = cov[1, 0] = float(dy @ pxy @ dx)
-    cov[0, 2] = cov[2, 0] = float(dyaw @ belief.sum(axis=1) @ dx)
-    cov[1, 2] = cov[2, 1] = float(dyaw @ belief.sum(axis=2) @ dy)
+    with np.errstate(over="ignore", invalid="ignore"):
+        cov[0, 0] = px @ (dx * dx)
+        cov[1, 1] = py @ (dy * dy)
+        cov[2, 2] = pk @ (dyaw * dyaw)
+        cov[0, 1] = cov[1, 0] = float(dy @ pxy @ dx)
+        cov[0, 2] = cov[2, 0] = float(dyaw @ belief.sum(axis=1) @ dx)
+        cov[1, 2] = cov[2, 1] = float(dyaw @ belief.sum(axis=2) @ dy)
     quantization = np.diag([model.resolution ** 2 / 12] * 2 + [model.bin_width ** 2 / 12])
     return cov + quantization
 
@@ -336,8 +682,21 @@ def mass_near(belief: FloatArray, model: GridModel, pose: tuple[float, float, fl
               radius: float, angle: float) -> float:
     """The belief's probability within ``radius`` (m) and ``angle`` (rad) of ``pose``:
     how sure the robot is of that pose (1: certain, near 0: lost)."""
+    _check_model(model)
+    pose = check_pose("pose", pose)
+    radius, angle = check_non_negative("radius", radius), check_non_negative("angle", angle)
+    return _mass_near(check_belief(belief, model), model, pose, radius, angle)
+
+
+def _mass_near(belief: FloatArray, model: GridModel, pose: tuple[float, float, float],
+               radius: float, angle: float) -> float:
     xs, ys = model.cell_centres()
-    near_xy = ((xs[None, :] - pose[0]) ** 2 + (ys[:, None] - pose[1]) ** 2) <= radius ** 2
+    dx, dy = xs[None, :] - pose[0], ys[:, None] - pose[1]
+    if radius < 1e150:
+        with np.errstate(over="ignore"):   # a pose that far is near no cell: inf > r^2
+            near_xy = (dx ** 2 + dy ** 2) <= radius ** 2
+    else:   # r^2 would overflow (an OverflowError of Python's floats): compare distances
+        near_xy = np.hypot(dx, dy) <= radius
     near_k = np.abs(_wrap(model.headings() - pose[2])) <= angle
     return float(belief[near_k][:, near_xy].sum())
 
@@ -345,6 +704,10 @@ def mass_near(belief: FloatArray, model: GridModel, pose: tuple[float, float, fl
 def belief_map(belief: FloatArray) -> np.ndarray:
     """The belief's maximum over headings scaled to 0..100 (int8), the largest 100: the
     picture an OccupancyGrid display draws."""
+    return _belief_map(_any_belief(belief))
+
+
+def _belief_map(belief: FloatArray) -> np.ndarray:
     top = belief.max(axis=0)
     peak = top.max()
     scaled = np.rint(100.0 * top / peak) if peak > 0 else np.zeros_like(top)
@@ -352,6 +715,10 @@ def belief_map(belief: FloatArray) -> np.ndarray:
 
 
 def entropy_bits(belief: FloatArray) -> float:
+    return _entropy_bits(_any_belief(belief, ndim=None))
+
+
+def _entropy_bits(belief: FloatArray) -> float:
     positive = belief[belief > 0]
     return float(-(positive * np.log2(positive)).sum()) + 0.0
 
@@ -405,10 +772,26 @@ def _shift_headings(belief: FloatArray, shift_bins: float) -> FloatArray:
     return out
 
 
+def _half_width(sigma: float) -> int:
+    """How many taps either side ``gaussian_taps`` lists (3 sigma), or one more than it
+    may (MAX_TAPS_HALF_WIDTH + 1) for a wider, or infinite, sigma."""
+    three = 3.0 * sigma
+    return math.ceil(three) if three <= MAX_TAPS_HALF_WIDTH else MAX_TAPS_HALF_WIDTH + 1
+
+
 def gaussian_taps(sigma: float) -> FloatArray:
     """A normalized Gaussian kernel of std ``sigma`` (in cells) over -3 sigma..3 sigma;
-    [1] when sigma is too small to spread."""
-    half = int(math.ceil(3.0 * sigma))
+    [1] when sigma is too small to spread. At most MAX_TAPS_HALF_WIDTH taps either side:
+    a wider sigma is refused (the steps cut theirs to the axis, see ``_reaching_taps``)."""
+    sigma = check_non_negative("sigma", sigma)
+    half = _half_width(sigma)
+    if half > MAX_TAPS_HALF_WIDTH:
+        raise InvalidInputError(f"sigma: {sigma:g} cells needs more than "
+                                f"{MAX_TAPS_HALF_WIDTH} taps either side")
+    return _gaussian_taps(sigma, half)
+
+
+def _gaussian_taps(sigma: float, half: int) -> FloatArray:
     if half == 0:
         return np.ones(1)
     offsets = np.arange(-half, half + 1)
@@ -416,10 +799,57 @@ def gaussian_taps(sigma: float) -> FloatArray:
     return taps / taps.sum()
 
 
-def _blur(belief: FloatArray, sigma: float, axis: int) -> FloatArray:
+def _identity(taps: FloatArray) -> bool:
+    return taps.size == 1 and taps[0] == 1.0
+
+
+def _reaching_taps(sigma: float, length: int) -> FloatArray:
+    """The taps of a blur of std ``sigma`` along an axis of ``length`` cells (not cyclic).
+
+    Taps more than length - 1 away reach only the zeros beyond the edge, so they are cut:
+    the blur is the same, bit for bit, and its cost and memory follow the axis, not
+    sigma. A sigma too wide to list its taps (beyond MAX_TAPS_HALF_WIDTH) gets those within
+    reach normalized among themselves: the prediction is normalized at its end, so only
+    the taps' ratios matter (an infinite sigma spreads evenly).
+    """
+    half = _half_width(sigma)
+    reach = length - 1
+    if half <= reach:
+        return _gaussian_taps(sigma, half)
+    if half <= MAX_TAPS_HALF_WIDTH:
+        return _gaussian_taps(sigma, half)[half - reach:half + reach + 1]
+    offsets = np.arange(-reach, reach + 1)
+    taps = np.exp(-0.5 * (offsets / sigma) ** 2)
+    return taps / taps.sum()
+
+
+def _heading_taps(sigma: float, bins: int) -> FloatArray:
+    """The taps of the cyclic blur of std ``sigma`` over ``bins`` headings.
+
+    Up to 3 sigma of four turns (4 K taps either side) they are ``gaussian_taps``, the
+    blur passing over the headings once per tap. A wider kernel is folded around the
+    circle (the taps of each heading offset modulo K summed), so the blur takes at most
+    K + 1 passes whatever sigma: the same blur, to rounding. Beyond MAX_TAPS_HALF_WIDTH
+    taps (a std of over 349,000 bins, an infinite one included) the spread is uniform:
+    the folded kernel differs from even by less than 0.005 K / sigma there.
+    """
+    half = _half_width(sigma)
+    if half <= 4 * bins:
+        return _gaussian_taps(sigma, half)
+    if half > MAX_TAPS_HALF_WIDTH:
+        return np.full(bins, 1.0 / bins)
+    folded = np.bincount(np.arange(-half, half + 1) % bins, weights=_gaussian_taps(sigma, half),
+                         minlength=bins)
+    # Centred taps for offsets -(K // 2)..K // 2: each residue once (for an even K the
+    # last offset, K / 2, is the first one again and gets nothing).
+    centre = bins // 2
+    return np.concatenate([folded[np.arange(-centre, bins - centre) % bins],
+                           np.zeros(1 - bins % 2)])
+
+
+def _blur(belief: FloatArray, taps: FloatArray, axis: int) -> FloatArray:
     """Spread along ``axis`` (not cyclic: what spreads past the edge is lost)."""
-    taps = gaussian_taps(sigma)
-    if taps.size == 1:
+    if _identity(taps):
         return belief
     half = taps.size // 2
     moved = np.moveaxis(belief, axis, -1)
@@ -431,10 +861,9 @@ def _blur(belief: FloatArray, sigma: float, axis: int) -> FloatArray:
     return np.moveaxis(out, -1, axis)
 
 
-def _blur_cyclic(belief: FloatArray, sigma: float, axis: int) -> FloatArray:
+def _blur_cyclic(belief: FloatArray, taps: FloatArray, axis: int) -> FloatArray:
     """Spread along a cyclic ``axis`` (the headings)."""
-    taps = gaussian_taps(sigma)
-    if taps.size == 1:
+    if _identity(taps):
         return belief
     half = taps.size // 2
     out = np.zeros_like(belief)

@@ -21,7 +21,7 @@ from estimation_nodes.core.kalman.models import (
     LinearGaussianModel,
     ScalarKalmanModel,
 )
-from estimation_nodes.core.validation import FloatArray
+from estimation_nodes.core.validation import FloatArray, as_finite_vector, check_finite, short
 
 
 def _overflow_checked_by_commit() -> np.errstate:
@@ -55,6 +55,7 @@ class KalmanFilter:
     def __init__(
         self, initial: GaussianState, model: ScalarKalmanModel | LinearGaussianModel
     ) -> None:
+        _check(initial, model)
         self._initial = initial
         self._model = model
         self.last_nis = float("nan")
@@ -68,7 +69,9 @@ class KalmanFilter:
         self, initial: GaussianState, model: ScalarKalmanModel | LinearGaussianModel
     ) -> bool:
         """New models apply from the next step; the initial state only on reset, unless the
-        state size changed: then the filter restarts from it. True when it restarted."""
+        state size changed: then the filter restarts from it. True when it restarted.
+        A model and state that do not fit each other are refused, and nothing changes."""
+        _check(initial, model)
         self._initial, self._model = initial, model
         if initial.x.shape == self.x.shape:
             return False
@@ -112,11 +115,12 @@ class KalmanFilter:
         if isinstance(model, ScalarKalmanModel):
             x, var = kalman.predict_scalar(
                 float(self.x[0]), float(self.P[0, 0]), _one("u", u), model.var_u)
-            self._commit(np.array([x]), np.array([[var]]))
+            self._commit(np.array([x]), np.array([[var]]), name="u")
         else:
+            u_vec = as_finite_vector("u", u, model.input_size)
             with _overflow_checked_by_commit():
-                x_new = kalman.predicted_mean(self.x, u, model)
-                self._commit(x_new, self._predicted_covariance())
+                x_new = kalman._predicted_mean(self.x, u_vec, model)
+                self._commit(x_new, self._predicted_covariance(), name="u")
         return self.estimate
 
     def correct(self, z: float | Sequence[float]) -> PositionEstimate:
@@ -129,12 +133,13 @@ class KalmanFilter:
             z = _one("z", z)
             x_corrected, var_corrected, _ = kalman.correct_scalar(x, var, z, model.var_z)
             nis = kalman.normalized_innovation_squared_scalar(x, var, z, model.var_z)
-            self._commit(np.array([x_corrected]), np.array([[var_corrected]]), nis)
+            self._commit(np.array([x_corrected]), np.array([[var_corrected]]), nis, name="z")
         else:
+            z_vec = as_finite_vector("z", z, model.measurement_size)
             with _overflow_checked_by_commit():
                 gain = self._correction_gain()
-                x_new, nis = kalman.corrected_mean(self.x, z, gain, model)
-                self._commit(x_new, gain.P, nis)
+                x_new, nis = kalman._corrected_mean(self.x, z_vec, gain, model)
+                self._commit(x_new, gain.P, nis, name="z")
         return self.estimate
 
     def prepare(self) -> None:
@@ -184,23 +189,36 @@ class KalmanFilter:
             prepared.gain = kalman.correction_gain(prepared.P, prepared.model)
         return prepared.gain
 
-    def _commit(self, x: FloatArray, P: FloatArray, nis: float | None = None) -> None:
-        """Take a step's result only if every number of it is finite."""
-        # Python's isfinite over a few values beats two numpy ufunc calls.
-        if not (all(map(math.isfinite, x.tolist())) and all(map(math.isfinite, P.ravel().tolist()))
-                and (nis is None or math.isfinite(nis))):
+    def _commit(self, x: FloatArray, P: FloatArray, nis: float | None = None, *,
+                name: str) -> None:
+        """Take a step's result only if every number of it is finite. (P is: the steps
+        that make it, kalman.predicted_covariance, correction_gain and the scalar ones,
+        refuse one that is not.)"""
+        # Python's isfinite over a few values beats a numpy ufunc call.
+        if not (all(map(math.isfinite, x.tolist())) and (nis is None or math.isfinite(nis))):
             raise errors.NonFiniteResultError(
-                "the result would not be finite (the input is too extreme for the current "
-                "estimate); estimate kept")
+                f"{name}: the result would not be finite (the input is too extreme for the "
+                f"current estimate); estimate kept")
         self.x, self.P = x, P
         if nis is not None:
             self.last_nis = nis
 
 
+def _check(initial: object, model: object) -> None:
+    """A Gaussian state and a model of one state size (1 for the scalar model)."""
+    if not isinstance(initial, GaussianState):
+        raise errors.InvalidInputError(f"initial: expected a GaussianState, got {short(initial)}")
+    if not isinstance(model, (ScalarKalmanModel, LinearGaussianModel)):
+        raise errors.InvalidInputError(f"model: expected a ScalarKalmanModel or a "
+                                       f"LinearGaussianModel, got {short(model)}")
+    n = 1 if isinstance(model, ScalarKalmanModel) else model.state_size
+    if initial.x.size != n:
+        raise errors.InputSizeError(f"initial: expected a state of {n} values for this "
+                                    f"model, got {initial.x.size}")
+
+
 def _one(name: str, value: float | Sequence[float]) -> float:
-    """A number given alone or as a one-element sequence."""
-    if isinstance(value, Sequence) or isinstance(value, np.ndarray):
-        if len(value) != 1:
-            raise errors.InputSizeError(f"{name}: expected 1 value, got {len(value)}")
-        return float(value[0])
-    return float(value)
+    """A number given alone or as a one-element sequence (or array)."""
+    if isinstance(value, (Sequence, np.ndarray)) and not isinstance(value, (str, bytes)):
+        return float(as_finite_vector(name, value, 1)[0])
+    return check_finite(name, value)

@@ -7,6 +7,16 @@ Symbols follow the book (Eqs. 6.34 to 6.36)::
 
 so F is the noise-input matrix, not the transition matrix as in filterpy.
 Every function returns new values and leaves its inputs alone.
+
+Every function checks its arguments (finite numbers of the model's sizes, a
+variance >= 0) and raises ``InvalidInputError`` naming the one that is wrong,
+or ``NonFiniteResultError`` when the result would not be finite (an extreme
+input overflows, an innovation covariance is singular): a result is never NaN
+or inf. P is taken as the covariance it is meant to be (symmetric positive
+semi-definite: GaussianState checks it, the steps keep it so); only its shape
+and finiteness are checked here, where an eigenvalue check would cost more
+than the step. An overflow warns (numpy's
+RuntimeWarning) before it is refused; KalmanFilter silences those.
 """
 
 from __future__ import annotations
@@ -16,9 +26,21 @@ from typing import NamedTuple, cast
 
 import numpy as np
 
-from estimation_nodes.core.errors import InputSizeError
+from estimation_nodes.core.errors import (
+    EstimationError,
+    InputSizeError,
+    InvalidInputError,
+    NonFiniteResultError,
+)
 from estimation_nodes.core.kalman.models import LinearGaussianModel
-from estimation_nodes.core.validation import FloatArray
+from estimation_nodes.core.validation import (
+    FloatArray,
+    as_finite_vector,
+    as_real_array,
+    check_finite,
+    check_non_negative,
+    short,
+)
 
 
 class ScalarEstimate(NamedTuple):
@@ -32,9 +54,23 @@ def fuse(x1: float, var1: float, x2: float, var2: float) -> ScalarEstimate:
     """Combine two independent Gaussian estimates of one quantity (Example 6.15).
 
     x = (var2 x1 + var1 x2) / (var1 + var2),   var = 1 / (1/var1 + 1/var2)
+
+    The variances are >= 0, not both 0 (two certain estimates that may disagree).
     """
+    x1, x2 = check_finite("x1", x1), check_finite("x2", x2)
+    var1, var2 = check_non_negative("var1", var1), check_non_negative("var2", var2)
     total = var1 + var2
-    return ScalarEstimate((var2 * x1 + var1 * x2) / total, var1 * var2 / total)
+    if not total > 0.0:
+        raise InvalidInputError("var1, var2: expected at least one variance > 0, got two 0s")
+    estimate = ScalarEstimate((var2 * x1 + var1 * x2) / total, var1 * var2 / total)
+    if not (math.isfinite(estimate.x) and math.isfinite(estimate.var)):
+        # A product overflowed on the way, not the answer: the same as a weighted step.
+        weight = var1 / total
+        estimate = ScalarEstimate(x1 + weight * (x2 - x1), weight * var2)
+    if not (math.isfinite(estimate.x) and math.isfinite(estimate.var)):
+        raise NonFiniteResultError(f"x1, var1, x2, var2: the fused estimate overflows ({x1!r}, "
+                                   f"{x2!r} with variances {var1!r}, {var2!r})")
+    return estimate
 
 
 # The scalar steps are the hot path of a 1-D filter and return plain tuples:
@@ -45,11 +81,34 @@ def fuse(x1: float, var1: float, x2: float, var2: float) -> ScalarEstimate:
 def predict_scalar(x: float, var: float, u: float, var_u: float) -> tuple[float, float]:
     """Prediction of Algorithm 4: the move adds its mean and its variance.
 
-    Returns ``(x, var)``; raises ``ValueError`` for a NaN or infinite ``u``.
+    Returns ``(x, var)``; raises ``ValueError`` for a NaN or infinite ``u`` (or x, or a
+    variance not finite and >= 0), ``NonFiniteResultError`` when the sum overflows.
     """
-    if not math.isfinite(u):
-        raise ValueError(f"u: expected a finite number, got {u!r}")
-    return x + u, var + var_u
+    # One comparison chain on the hot path; the error path finds the culprit.
+    try:
+        x_new, var_new = x + u, var + var_u
+        ok = (math.isfinite(u) and math.isfinite(x_new) and var >= 0.0 and var_u >= 0.0
+              and math.isfinite(var_new))
+    except (TypeError, ValueError):   # not numbers, or arrays (no truth value)
+        ok = False
+    if not ok:
+        _refuse_scalar(("u", u), ("x", x), ("var", var), ("var_u", var_u))
+        raise NonFiniteResultError(f"x, u, var, var_u: x + u ({x!r} + {u!r}) or var + var_u "
+                                   f"({var!r} + {var_u!r}) overflows; estimate kept")
+    return x_new, var_new
+
+
+def _refuse_scalar(*named: tuple[str, float]) -> None:
+    """Raise InvalidInputError for the first argument that is not a finite number (a
+    variance, one whose name starts with var, also >= 0)."""
+    for name, value in named:
+        number = check_finite(name, value)
+        if name.startswith("var"):
+            check_non_negative(name, number)
+
+
+#: Above this gain the scalar correction's variance is w var_z rather than (1 - w) var.
+_GAIN_NEAR_ONE = 1.0 - 1e-8
 
 
 def correct_scalar(
@@ -57,15 +116,35 @@ def correct_scalar(
 ) -> tuple[float, float, float]:
     """Correction of Algorithm 4 with the gain w = var / (var + var_z).
 
-    x' = x + w (z - x),   var' = (1 - w) var
+    x' = x + w (z - x),   var' = (1 - w) var   (= w var_z, taken so for w within 1e-8 of 1)
 
     Returns ``(x, var, gain)``; raises ``ValueError`` for a NaN or infinite
-    ``z``, and nothing is changed then.
+    ``z`` (or x, or variances not finite and >= 0, or both 0), and nothing is
+    changed then; ``NonFiniteResultError`` when z - x overflows.
     """
-    if not math.isfinite(z):
-        raise ValueError(f"z: expected a finite number, got {z!r}")
-    gain = var / (var + var_z)
-    return x + gain * (z - x), (1.0 - gain) * var, gain
+    try:
+        total = var + var_z
+        ok = (math.isfinite(z) and var >= 0.0 and var_z >= 0.0 and 0.0 < total < math.inf)
+        if ok:
+            gain = var / total
+            x_new = x + gain * (z - x)
+            if not math.isfinite(x_new):   # z - x overflowed, perhaps not the answer
+                x_new = (1.0 - gain) * x + gain * z
+            ok = math.isfinite(x_new)
+    except (TypeError, ValueError):   # not numbers, or arrays (no truth value)
+        ok = False
+    if not ok:
+        _refuse_scalar(("z", z), ("x", x), ("var", var), ("var_z", var_z))
+        if not 0.0 < float(var) + float(var_z) < math.inf:
+            raise InvalidInputError(f"var, var_z: expected a finite sum > 0, got {var!r} + "
+                                    f"{var_z!r}")
+        raise NonFiniteResultError(f"x, z: z - x overflows ({z!r} - {x!r}); estimate kept")
+    if gain > _GAIN_NEAR_ONE:
+        # (1 - w) var loses its digits as w nears 1 (a prior far wider than the measurement:
+        # from var / var_z ~ 1e16 on w is 1 exactly and var' would be 0, a filter certain
+        # for ever); w var_z is the same quantity without the cancellation.
+        return x_new, gain * var_z, gain
+    return x_new, (1.0 - gain) * var, gain
 
 
 # The matrix steps below are small-matrix code: a 4-state step is a few dozen
@@ -84,13 +163,58 @@ def _symmetric(matrix: FloatArray) -> FloatArray:
 
 
 def _as_vector(name: str, value: object, size: int) -> FloatArray:
-    vector = np.asarray(value, dtype=np.float64).reshape(-1)
-    if vector.size != size:
-        raise InputSizeError(f"{name}: expected {size} values, got {vector.size}")
-    # Python's isfinite over the few values of a small vector beats a numpy ufunc call.
-    if not all(map(math.isfinite, vector.tolist())):
-        raise ValueError(f"{name}: expected finite numbers, got {vector.tolist()}")
+    return as_finite_vector(name, value, size)
+
+
+def _check_model(model: object) -> LinearGaussianModel:
+    if not isinstance(model, LinearGaussianModel):
+        raise InvalidInputError(f"model: expected a LinearGaussianModel, got {short(model)}")
+    return model
+
+
+# x and P are checked for their shapes up front and for finiteness through the result:
+# a NaN or inf in x or P makes every value it touches NaN or inf (IEEE arithmetic, 0 * inf
+# included), so a finite result means finite inputs, and a refused result looks at the
+# inputs to name the one to blame. That keeps the filter's steps on its own state at the
+# cost of one check of what they produce.
+
+
+def _state(x: object, model: LinearGaussianModel) -> FloatArray:
+    """x: the model's n numbers, as a flat float array (finiteness: see above)."""
+    if isinstance(x, np.ndarray) and x.dtype == np.float64 and x.ndim == 1:
+        vector = x
+    else:
+        vector = as_real_array("x", x).reshape(-1)
+    if vector.size != model.state_size:
+        raise InputSizeError(f"x: expected {model.state_size} values, got {vector.size}")
     return vector
+
+
+def _covariance(P: object, model: LinearGaussianModel) -> FloatArray:
+    """P: an n x n array (symmetry and definiteness are not checked, finiteness above)."""
+    matrix = P if isinstance(P, np.ndarray) and P.dtype == np.float64 else as_real_array("P", P)
+    n = model.state_size
+    if matrix.shape != (n, n):
+        raise InputSizeError(f"P: expected shape ({n}, {n}), got {matrix.shape}")
+    return matrix
+
+
+def _finite(*arrays: FloatArray) -> bool:
+    # Python's isfinite over the few values of small matrices beats numpy ufunc calls.
+    values: list[float] = []
+    for array in arrays:
+        values += array.ravel().tolist()
+    return all(map(math.isfinite, values))
+
+
+def _overflows(what: str, **inputs: FloatArray) -> EstimationError:
+    """The error for a result that is not finite: an input with NaN or inf (named), or
+    else an overflow."""
+    for name, value in inputs.items():
+        if not _finite(value):
+            return InvalidInputError(f"{name}: expected finite numbers, got {short(value)}")
+    return NonFiniteResultError(f"{what} would not be finite (an input too extreme for the "
+                                f"estimate); nothing changed")
 
 
 def _small_inverse(S: FloatArray) -> FloatArray | None:
@@ -100,7 +224,7 @@ def _small_inverse(S: FloatArray) -> FloatArray | None:
     loses accuracy: those go to a LAPACK solve."""
     size = S.shape[0]
     if size == 1:
-        return 1.0 / S
+        return 1.0 / S if S[0, 0] > 0.0 else None
     if size == 2:
         (a, b), (c, d) = S.tolist()
         determinant = a * d - b * c
@@ -117,6 +241,15 @@ def _small_inverse(S: FloatArray) -> FloatArray | None:
 
 def predicted_covariance(P: FloatArray, model: LinearGaussianModel) -> FloatArray:
     """P' = A P A' + F Q F' of the prediction (Eq. 6.35), exactly symmetric."""
+    model = _check_model(model)
+    P = _covariance(P, model)
+    P_pred = _predicted_covariance(P, model)
+    if not _finite(P_pred):
+        raise _overflows("P: the predicted covariance A P A' + F Q F'", P=P)
+    return P_pred
+
+
+def _predicted_covariance(P: FloatArray, model: LinearGaussianModel) -> FloatArray:
     # H = A P A' / 2 (exactly: halving is exact), then H + H' is A P A' made
     # exactly symmetric, without a separate averaging pass.
     P_pred = model.A.dot(P).dot(model.half_A_transposed)
@@ -126,9 +259,17 @@ def predicted_covariance(P: FloatArray, model: LinearGaussianModel) -> FloatArra
 
 
 def predicted_mean(x: FloatArray, u: object, model: LinearGaussianModel) -> FloatArray:
-    """x' = A x + B u of the prediction (Eq. 6.35); raises ValueError for a ``u`` of the
-    wrong size (InputSizeError) or with NaN or inf."""
-    u_vec = _as_vector("u", u, model.input_size)
+    """x' = A x + B u of the prediction (Eq. 6.35); raises ValueError for a ``u`` (or x)
+    of the wrong size (InputSizeError) or with NaN or inf."""
+    model = _check_model(model)
+    x = _state(x, model)
+    x_pred = _predicted_mean(x, _as_vector("u", u, model.input_size), model)
+    if not _finite(x_pred):
+        raise _overflows("x, u: the predicted mean A x + B u", x=x)
+    return x_pred
+
+
+def _predicted_mean(x: FloatArray, u_vec: FloatArray, model: LinearGaussianModel) -> FloatArray:
     x_pred = model.A.dot(x)
     x_pred += model.B.dot(u_vec)
     return x_pred
@@ -138,7 +279,13 @@ def predict(
     x: FloatArray, P: FloatArray, u: object, model: LinearGaussianModel
 ) -> tuple[FloatArray, FloatArray]:
     """Prediction (Eq. 6.35): x' = A x + B u,  P' = A P A' + F Q F'."""
-    return predicted_mean(x, u, model), predicted_covariance(P, model)
+    model = _check_model(model)
+    x, P = _state(x, model), _covariance(P, model)
+    u_vec = _as_vector("u", u, model.input_size)
+    x_pred, P_pred = _predicted_mean(x, u_vec, model), _predicted_covariance(P, model)
+    if not _finite(x_pred, P_pred):
+        raise _overflows("x, P, u: the prediction", x=x, P=P)
+    return x_pred, P_pred
 
 
 class CorrectionGain(NamedTuple):
@@ -161,7 +308,15 @@ def correction_gain(P: FloatArray, model: LinearGaussianModel) -> CorrectionGain
 
     The Joseph form holds for any gain and keeps P symmetric positive
     semi-definite where the short form P - K C P can lose it to rounding.
+
+    A singular innovation covariance (no measurement noise along a direction P is
+    certain of too) has no gain: ``NonFiniteResultError``.
     """
+    model = _check_model(model)
+    return _correction_gain(_covariance(P, model), model)
+
+
+def _correction_gain(P: FloatArray, model: LinearGaussianModel) -> CorrectionGain:
     C, R = model.C, model.R
     PCt = P.dot(model.C_transposed)
     innovation_cov = C.dot(PCt)
@@ -170,20 +325,37 @@ def correction_gain(P: FloatArray, model: LinearGaussianModel) -> CorrectionGain
     if S_inv is not None:
         K = PCt.dot(S_inv)
     else:   # S and P are symmetric, so K' = S^-1 (C P)
-        K = cast(FloatArray, np.linalg.solve(innovation_cov, PCt.T).T)
+        try:
+            K = cast(FloatArray, np.linalg.solve(innovation_cov, PCt.T).T)
+        except np.linalg.LinAlgError:
+            raise _overflows("P: the gain (the innovation covariance C P C' + R is "
+                             "singular)", P=P) from None
     I_KC = model.identity - K.dot(C)
     P_new = I_KC.dot(P).dot(I_KC.T)
     P_new += K.dot(R).dot(K.T)
-    return CorrectionGain(K, _symmetric(P_new), innovation_cov, S_inv)
+    P_new = _symmetric(P_new)
+    if not _finite(K, P_new):
+        raise _overflows("P: the gain or the corrected covariance", P=P)
+    return CorrectionGain(K, P_new, innovation_cov, S_inv)
 
 
 def corrected_mean(
     x: FloatArray, z: object, gain: CorrectionGain, model: LinearGaussianModel
 ) -> tuple[FloatArray, float]:
     """x' = x + K (z - C x) of Eq. 6.36 and the normalized innovation squared
-    y' S^-1 y of y = z - C x; raises ValueError for a ``z`` of the wrong size
+    y' S^-1 y of y = z - C x; raises ValueError for a ``z`` (or x) of the wrong size
     (InputSizeError) or with NaN or inf."""
-    return _corrected_mean(x, _as_vector("z", z, model.measurement_size), gain, model)
+    model = _check_model(model)
+    x = _state(x, model)
+    z_vec = _as_vector("z", z, model.measurement_size)
+    if not (isinstance(gain, CorrectionGain) and gain.K.shape == (model.state_size,
+                                                                   model.measurement_size)):
+        raise InvalidInputError(f"gain: expected the CorrectionGain of this model, got "
+                                f"{short(gain)}")
+    x_new, nis = _corrected_mean(x, z_vec, gain, model)
+    if not (_finite(x_new) and math.isfinite(nis)):
+        raise _overflows("x, z: the corrected mean or its NIS", x=x)
+    return x_new, nis
 
 
 def _corrected_mean(
@@ -216,27 +388,52 @@ def correct_with_nis(
     x: FloatArray, P: FloatArray, z: object, model: LinearGaussianModel
 ) -> tuple[FloatArray, FloatArray, FloatArray, float]:
     """``correct`` and the normalized innovation squared of ``z``: ``(x, P, K, nis)``."""
+    model = _check_model(model)
     z_vec = _as_vector("z", z, model.measurement_size)   # a bad z raises before any work
-    gain = correction_gain(P, model)
+    x, P = _state(x, model), _covariance(P, model)
+    gain = _correction_gain(P, model)
     x_new, nis = _corrected_mean(x, z_vec, gain, model)
+    if not (_finite(x_new) and math.isfinite(nis)):
+        raise _overflows("x, P, z: the corrected mean or its NIS", x=x)
     return x_new, gain.P, gain.K, nis
 
 
 def normalized_innovation_squared_scalar(x: float, var: float, z: float, var_z: float) -> float:
     """NIS of a scalar measurement: (z - x)^2 / (var + var_z), chi-square with 1 dof.
 
-    inf (not OverflowError, as ``**`` would raise) when the square overflows.
+    ``NonFiniteResultError`` (not OverflowError, as ``**`` would raise, nor inf) when
+    the square overflows.
     """
-    innovation = z - x
-    return innovation * innovation / (var + var_z)
+    try:
+        total = var + var_z
+        innovation = z - x
+        nis = innovation * innovation / total if total > 0.0 else math.nan
+        ok = math.isfinite(nis) and var >= 0.0 and var_z >= 0.0 and math.isfinite(total)
+    except (TypeError, ValueError):   # not numbers, or arrays (no truth value)
+        ok = False
+    if not ok:
+        _refuse_scalar(("z", z), ("x", x), ("var", var), ("var_z", var_z))
+        if not total > 0.0:
+            raise InvalidInputError(f"var, var_z: expected a sum > 0, got {var!r} + {var_z!r}")
+        raise _overflows(f"x, z, var, var_z: the NIS of z = {z!r} about x = {x!r}")
+    return nis
 
 
 def normalized_innovation_squared(
     x: FloatArray, P: FloatArray, z: object, model: LinearGaussianModel
 ) -> float:
     """NIS = y' S^-1 y with y = z - C x, S = C P C' + R: chi-square with dim(z) dof."""
+    model = _check_model(model)
     z_vec = _as_vector("z", z, model.measurement_size)
+    x, P = _state(x, model), _covariance(P, model)
     innovation = z_vec - model.C.dot(x)
     innovation_cov = model.C.dot(P).dot(model.C_transposed)
     innovation_cov += model.R
-    return float(innovation.dot(np.linalg.solve(innovation_cov, innovation)))
+    try:
+        nis = float(innovation.dot(np.linalg.solve(innovation_cov, innovation)))
+    except np.linalg.LinAlgError:
+        raise _overflows("P: the NIS (the innovation covariance C P C' + R is "
+                         "singular)", x=x, P=P) from None
+    if not math.isfinite(nis):
+        raise _overflows(f"x, P, z: the NIS of {z_vec.tolist()}", x=x, P=P)
+    return nis

@@ -12,11 +12,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimation_nodes.core.errors import InputSizeError, InvalidInputError
 from estimation_nodes.core.validation import (
     FloatArray,
     as_finite_array,
     check_covariance,
+    check_finite,
     check_positive,
+    short,
 )
 
 
@@ -61,27 +64,33 @@ class LinearGaussianModel:
     def __post_init__(self) -> None:
         A = as_finite_array("A", self.A, ndim=2)
         n = A.shape[0]
-        if A.shape != (n, n):
-            raise ValueError(f"A: expected a square matrix, got shape {A.shape}")
+        if A.shape != (n, n) or n == 0:
+            raise InputSizeError(f"A: expected a square matrix of at least one state, got "
+                                 f"shape {A.shape}")
         B = as_finite_array("B", self.B, ndim=2)
         C = as_finite_array("C", self.C, ndim=2)
         F = as_finite_array("F", self.F, ndim=2)
         for name, matrix in (("B", B), ("F", F)):
             if matrix.shape[0] != n:
-                raise ValueError(
+                raise InputSizeError(
                     f"{name}: expected {n} rows to match A ({n}x{n}), got shape {matrix.shape}"
                 )
-        if C.shape[1] != n:
-            raise ValueError(
-                f"C: expected {n} columns to match A ({n}x{n}), got shape {C.shape}"
+        if C.shape[1] != n or C.shape[0] == 0:
+            raise InputSizeError(
+                f"C: expected {n} columns to match A ({n}x{n}) and at least one row (a "
+                f"measurement), got shape {C.shape}"
             )
         Q = check_covariance("Q", self.Q, F.shape[1])
         R = check_covariance("R", self.R, C.shape[0])
         for name, matrix in (("A", A), ("B", B), ("C", C), ("F", F), ("Q", Q), ("R", R)):
             object.__setattr__(self, name, matrix)
         # Fixed per model, so computed once rather than at every step.
-        process_noise = F @ Q @ F.T
-        process_noise = 0.5 * (process_noise + process_noise.T)
+        with np.errstate(over="ignore", invalid="ignore"):
+            process_noise = F @ Q @ F.T
+            process_noise = 0.5 * (process_noise + process_noise.T)
+        if not np.isfinite(process_noise).all():
+            raise InvalidInputError(f"F, Q: the process noise F Q F' overflows: F = {short(F)}, "
+                                    f"Q = {short(Q)}")
         process_noise.setflags(write=False)
         identity = np.eye(n)
         identity.setflags(write=False)
@@ -113,6 +122,7 @@ class LinearGaussianModel:
     def scalar(cls, var_u: float, var_z: float) -> LinearGaussianModel:
         """A = B = C = F = 1: the matrix form of Algorithm 4."""
         one = np.ones((1, 1))
+        var_u, var_z = check_finite("var_u", var_u), check_finite("var_z", var_z)
         return cls(one, one, one, one, np.array([[var_u]]), np.array([[var_z]]))
 
 
@@ -125,6 +135,8 @@ class GaussianState:
 
     def __post_init__(self) -> None:
         x = as_finite_array("x0", self.x, ndim=1)
+        if x.size == 0:
+            raise InputSizeError("x0: expected at least one state value, got none")
         P = check_covariance("P0", self.P, x.size)
         object.__setattr__(self, "x", x)
         object.__setattr__(self, "P", P)

@@ -12,6 +12,13 @@ Prediction (total probability, Eq. of the book's prediction step)::
 Correction (Bayes' rule)::
 
     bel(x | z) = p(z | x) bel(x) / p(z),   p(z) = sum_x p(z | x) bel(x)
+
+Each step checks its arguments (``InvalidInputError`` naming the one that is
+wrong) with a numpy reduction or two, no Python loop: a belief is a non-empty
+vector of probabilities in [0, 1], a likelihood one of finite numbers >= 0 of
+the belief's size, a move an integer. ``HistogramFilter`` (filter.py) checks
+its inputs and calls the unchecked steps (underscored here) on the belief it
+holds, so a node's step costs no more than before.
 """
 
 from __future__ import annotations
@@ -22,9 +29,20 @@ from types import ModuleType
 import numpy as np
 
 from estimation_nodes.core.compiled_loader import load_kernels
-from estimation_nodes.core.errors import ZeroEvidenceError
+from estimation_nodes.core.errors import (
+    InputSizeError,
+    InvalidInputError,
+    NonFiniteResultError,
+    ZeroEvidenceError,
+)
 from estimation_nodes.core.tiles.models import MotionKernel
-from estimation_nodes.core.validation import FloatArray
+from estimation_nodes.core.validation import (
+    FloatArray,
+    as_real_array,
+    check_integer,
+    check_probabilities,
+    short,
+)
 
 #: Worlds of at least this many cells take the compiled kernels of
 #: ``compiled`` (numba) when numba imports: from here on the passes over
@@ -34,18 +52,41 @@ from estimation_nodes.core.validation import FloatArray
 COMPILED_MIN_CELLS = 1 << 16
 
 
+def _size(size: int) -> int:
+    size = check_integer("size", size)
+    if size < 1:
+        raise InvalidInputError(f"size: expected at least one cell, got {size}")
+    return size
+
+
 def uniform(size: int) -> FloatArray:
     """The belief of a robot that knows nothing: 1/N in every cell."""
-    if size < 1:
-        raise ValueError(f"size: expected at least one cell, got {size}")
+    size = _size(size)
     return np.full(size, 1.0 / size)
 
 
 def one_hot(size: int, cell: int) -> FloatArray:
-    """The belief of a robot that knows it is in ``cell``."""
+    """The belief of a robot that knows it is in ``cell`` (taken modulo the size)."""
+    size = _size(size)
     belief = np.zeros(size)
-    belief[cell % size] = 1.0
+    belief[check_integer("cell", cell) % size] = 1.0
     return belief
+
+
+def check_belief(value: object) -> FloatArray:
+    """A belief for the steps: a non-empty vector of probabilities in [0, 1] (not
+    necessarily summing to 1), C-contiguous float64, the caller's own when it is one."""
+    array = as_real_array("belief", value)
+    if array.ndim != 1:
+        raise InputSizeError(f"belief: expected a vector (one value per cell), got shape "
+                             f"{array.shape}")
+    return check_probabilities("belief", array, array.shape)
+
+
+def _check_kernel(kernel: object) -> MotionKernel:
+    if not isinstance(kernel, MotionKernel):
+        raise InvalidInputError(f"kernel: expected a MotionKernel, got {short(kernel)}")
+    return kernel
 
 
 def _compiled_module() -> ModuleType | None:
@@ -109,9 +150,15 @@ def predict(
     (N,) array
         The predicted belief.
     """
-    source = np.ascontiguousarray(belief, dtype=np.float64)
+    source = check_belief(belief)
     # Python ints: a huge u wraps exactly instead of overflowing a fixed-width type.
-    shift = int(u) % source.size
+    shift = check_integer("u", u) % source.size
+    return _predict(source, shift, _check_kernel(kernel), compiled)
+
+
+def _predict(source: FloatArray, shift: int, kernel: MotionKernel,
+             compiled: bool = True) -> FloatArray:
+    """``predict`` of a checked belief (contiguous float64), the shift in [0, N)."""
     kernels = compiled_kernels(source.size, compiled)
     if kernels is not None:   # shift, wrap and kernel in one compiled pass
         predicted = np.empty(source.size)
@@ -136,18 +183,53 @@ def correct(
     ``out`` is written only after the evidence is known to be positive, so a
     rejected observation leaves it as it was. ``compiled`` as in ``predict``.
 
+    ``belief``: non-negative weights of the cells (a probability vector, or any prior:
+    the posterior is normalized); ``likelihood``: p(z | x) of each cell, finite, >= 0.
+
     Raises
     ------
     ZeroEvidenceError
         If the observation is impossible in every cell the belief allows
         (p(z) = 0); the caller keeps its belief, nothing is divided by zero.
+    InvalidInputError
+        If an argument is not of that form (named in the message).
+    NonFiniteResultError
+        If the evidence overflows (weights too large for the sum of their products).
     """
+    belief = np.ascontiguousarray(as_real_array("belief", belief))
+    likelihood = np.ascontiguousarray(as_real_array("likelihood", likelihood))
+    if belief.ndim != 1 or belief.size == 0:
+        raise InputSizeError(f"belief: expected a vector of at least one cell, got shape "
+                             f"{belief.shape}")
+    if likelihood.shape != belief.shape:
+        raise InputSizeError(f"belief, likelihood: expected one likelihood per cell, got "
+                             f"shapes {belief.shape} and {likelihood.shape}")
+    if out is not None and not (isinstance(out, np.ndarray) and out.dtype == np.float64
+                                and out.shape == belief.shape and out.flags.writeable
+                                and out.flags.c_contiguous):
+        raise InvalidInputError(f"out: expected a writable contiguous float64 array of "
+                                f"{belief.size} values, got {short(out)}")
+    # NaN or inf in either makes the evidence NaN or inf, which _correct refuses; a
+    # negative value has to be looked for.
+    if not belief.min() >= 0.0:
+        raise InvalidInputError(f"belief: expected weights >= 0, got {short(belief)}")
+    if not likelihood.min() >= 0.0:
+        raise InvalidInputError(f"likelihood: expected values >= 0, got {short(likelihood)}")
+    return _correct(belief, likelihood, out, compiled=compiled)
+
+
+def _correct(
+    belief: FloatArray,
+    likelihood: FloatArray,
+    out: FloatArray | None = None,
+    *,
+    compiled: bool = True,
+) -> tuple[FloatArray, float]:
+    """``correct`` of a belief and a likelihood of one size, both without negative values."""
     # The evidence as a dot product reads both arrays once, without a temporary.
     evidence = float(np.dot(belief, likelihood))
     if not evidence > 0.0 or not math.isfinite(evidence):
-        raise ZeroEvidenceError(
-            f"observation has evidence {evidence!r}: every cell of the belief rules it out"
-        )
+        _refuse(evidence, belief, likelihood)
     scale = 1.0 / evidence
     if not math.isfinite(scale):
         # A subnormal evidence: its reciprocal overflows, but each term is at most
@@ -167,13 +249,27 @@ def correct(
     return posterior, evidence
 
 
+def _refuse(evidence: float, belief: FloatArray, likelihood: FloatArray) -> None:
+    """Raise the reason why the evidence is not a positive finite number."""
+    for name, values in (("belief", belief), ("likelihood", likelihood)):
+        if not np.isfinite(values).all():
+            raise InvalidInputError(f"{name}: expected finite numbers, got {short(values)}")
+    if math.isinf(evidence):
+        raise NonFiniteResultError(
+            "belief, likelihood: the evidence sum(belief * likelihood) overflows; belief kept")
+    raise ZeroEvidenceError(
+        f"observation has evidence {evidence!r}: every cell of the belief rules it out"
+    )
+
+
 def most_likely_cell(belief: FloatArray) -> int:
     """Index of the cell with the highest probability (the first one on a tie)."""
-    return int(np.argmax(belief))
+    return int(np.argmax(check_belief(belief)))
 
 
 def entropy(belief: FloatArray) -> float:
     """Shannon entropy of the belief in bits (0: certain; log2 N: uniform)."""
+    belief = check_belief(belief)
     positive = belief[belief > 0.0]
     # abs: a certain belief sums to -0.0, which would print as "-0".
     return abs(float((positive * np.log2(positive)).sum()))

@@ -14,9 +14,12 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from estimation_nodes.core.errors import InvalidInputError
 from estimation_nodes.core.validation import (
     FloatArray,
     as_finite_array,
+    as_real_array,
+    check_integer,
     check_probability_vector,
     short,
 )
@@ -42,7 +45,7 @@ class MotionKernel:
     def __post_init__(self) -> None:
         weights = check_probability_vector("motion_kernel", self.weights)
         if weights.size % 2 == 0:
-            raise ValueError(
+            raise InvalidInputError(
                 f"motion_kernel: expected an odd number of weights centred on the target, "
                 f"got {weights.size}: {short(weights)}"
             )
@@ -71,16 +74,16 @@ class SensorModel:
     probabilities: FloatArray
 
     def __post_init__(self) -> None:
-        classes = tuple(str(name) for name in self.classes)
+        classes = _names("classes", self.classes)
         if not classes:
-            raise ValueError("classes: expected at least one class name, got an empty list")
+            raise InvalidInputError("classes: expected at least one class name, got an empty list")
         if any(not name for name in classes):
-            raise ValueError(f"classes: expected non-empty names, got {list(classes)}")
+            raise InvalidInputError(f"classes: expected non-empty names, got {list(classes)}")
         if len(set(classes)) != len(classes):
-            raise ValueError(f"classes: expected distinct names, got {list(classes)}")
+            raise InvalidInputError(f"classes: expected distinct names, got {list(classes)}")
         matrix = as_finite_array("sensor_model", self.probabilities, ndim=2)
         if matrix.shape != (len(classes), len(classes)):
-            raise ValueError(
+            raise InvalidInputError(
                 f"sensor_model: expected {len(classes)}x{len(classes)} probabilities "
                 f"(one row per true class in {list(classes)}), got shape {matrix.shape}"
             )
@@ -94,7 +97,7 @@ class SensorModel:
         try:
             return self.classes.index(name)
         except ValueError:
-            raise ValueError(
+            raise InvalidInputError(
                 f"observation: unknown tile class {name!r}, expected one of {list(self.classes)}"
             ) from None
 
@@ -116,14 +119,18 @@ class HistogramModel:
     def __post_init__(self) -> None:
         # Each cell refers to the sensor model's own name object where it can: a
         # million cells read from a file then hold pointers, not a million strings.
+        if not isinstance(self.sensor, SensorModel):
+            raise InvalidInputError(f"sensor: expected a SensorModel, got {short(self.sensor)}")
+        if not isinstance(self.kernel, MotionKernel):
+            raise InvalidInputError(f"kernel: expected a MotionKernel, got {short(self.kernel)}")
         canonical = {name: name for name in self.sensor.classes}
-        world = tuple(canonical.get(name, name) for name in map(str, self.world))
+        world = tuple(canonical.get(name, name) for name in _names("world", self.world))
         if not world:
-            raise ValueError("world: expected at least one cell, got an empty list")
+            raise InvalidInputError("world: expected at least one cell, got an empty list")
         lookup = {name: index for index, name in enumerate(self.sensor.classes)}
         unknown = sorted(set(world) - set(lookup))
         if unknown:
-            raise ValueError(
+            raise InvalidInputError(
                 f"world: cells name classes {unknown} that the sensor model lacks, "
                 f"expected only {list(self.sensor.classes)}"
             )
@@ -146,7 +153,7 @@ class HistogramModel:
 
     def cell_class_index(self, cell: int) -> int:
         """Index in ``sensor.classes`` of the true class of a cell (taken modulo the size)."""
-        return int(self._world_index[cell % self.size])
+        return int(self._world_index[check_integer("cell", cell) % self.size])
 
     @classmethod
     def from_lists(
@@ -157,11 +164,13 @@ class HistogramModel:
         kernel: Sequence[float],
     ) -> HistogramModel:
         """Build from plain lists; ``sensor_model`` may be flat (row-major) or nested."""
-        matrix = np.asarray(sensor_model, dtype=np.float64)
-        if matrix.ndim == 1 and matrix.size == len(classes) ** 2:
-            matrix = matrix.reshape(len(classes), len(classes))
-        sensor = SensorModel(tuple(classes), matrix)
-        return cls(tuple(world), sensor, MotionKernel(np.asarray(kernel, dtype=np.float64)))
+        names = _names("classes", classes)
+        matrix = as_real_array("sensor_model", sensor_model)
+        if matrix.ndim == 1 and matrix.size == len(names) ** 2:
+            matrix = matrix.reshape(len(names), len(names))
+        sensor = SensorModel(names, matrix)
+        weights = as_real_array("motion_kernel", kernel)
+        return cls(_names("world", world), sensor, MotionKernel(weights))
 
     @classmethod
     def book(cls) -> HistogramModel:
@@ -176,12 +185,28 @@ def check_belief(name: str, value: Any, size: int) -> FloatArray:
     """
     vector = as_finite_array(name, value, ndim=1)
     if vector.size != size:
-        raise ValueError(f"{name}: expected {size} values (one per cell), got {vector.size}")
+        raise InvalidInputError(
+            f"{name}: expected {size} values (one per cell), got {vector.size}")
     if np.any(vector < 0.0):
-        raise ValueError(f"{name}: expected non-negative values, got {short(vector)}")
+        raise InvalidInputError(f"{name}: expected non-negative values, got {short(vector)}")
     total = float(vector.sum())
     if total <= 0.0:
-        raise ValueError(f"{name}: expected values with a positive sum, got {short(vector)}")
+        raise InvalidInputError(
+            f"{name}: expected values with a positive sum, got {short(vector)}")
+    if not np.isfinite(total):   # huge weights: their sum overflows, their ratios do not
+        vector = vector / vector.max()
+        total = float(vector.sum())
     normalized = vector / total
     normalized.setflags(write=False)
     return normalized
+
+
+def _names(name: str, values: Any) -> tuple[str, ...]:
+    """A list of names (tile classes, the world's cells) as a tuple of strings."""
+    if isinstance(values, (str, bytes)):
+        raise InvalidInputError(f"{name}: expected a list of names, got the string {values!r}")
+    try:
+        return tuple(map(str, values))
+    except TypeError:
+        raise InvalidInputError(f"{name}: expected a list of names, got {short(values)}") \
+            from None

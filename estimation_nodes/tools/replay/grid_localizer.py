@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation_nodes.core import errors
 from estimation_nodes.nodes.grid_messages import planar_pose
 from estimation_nodes.params import topics
 from estimation_nodes.params.grid import build_grid_localizer_settings
@@ -68,7 +69,7 @@ def header_stamp_ns(msg) -> int:
 
 
 def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> GridComparison:
-    from estimation_nodes.nodes.grid_messages import scan_beams
+    from estimation_nodes.nodes.grid_messages import finite_pose, scan_beams
 
     messages, metadata = recorded_messages(path)
     values = spec_defaults(GRID_LOCALIZER_SPECS)
@@ -104,7 +105,9 @@ def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> Gr
     radius, angle = settings.quality_radius, settings.quality_angle
     for stamp, _rank, topic, msg in inputs:
         if topic == f"/{topics.ODOM}":
-            localization.on_odometry(planar_pose(msg.pose.pose), stamp)
+            pose = planar_pose(msg.pose.pose)
+            if finite_pose(pose):             # the node drops the others, as the core would
+                localization.on_odometry(pose, stamp)
             continue
         if not started and stamp not in online:
             continue                          # before the localizer's first update
@@ -112,7 +115,10 @@ def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> Gr
         if not localization.due(stamp):
             continue
         ranges, angles, _ = scan_beams(msg, settings.sensor.max_range, settings.max_beams)
-        localization.update(ranges, angles, stamp)
+        try:
+            localization.update(ranges, angles, stamp)
+        except errors.EstimationError:        # dropped online too: nothing published
+            continue
         _compare(comparison, stamp, online.get(stamp), localization.estimate(radius, angle),
                  tolerance)
     return comparison
