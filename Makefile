@@ -14,7 +14,7 @@ ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 ROS_DOMAIN_ID ?= 42
 export ROS_AUTOMATIC_DISCOVERY_RANGE ROS_DOMAIN_ID
 
-.PHONY: demo test bench install clean
+.PHONY: demo test test-under-load bench install clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -34,6 +34,11 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/python -m pytest $(PYTEST_ARGS)
+
+# The same suite with every core kept busy by other processes (.ci/test-under-load starts
+# them and ends each by its pid); LOAD_PROCESSES sets how many (default: one per core).
+test-under-load: $(STAMP)
+	VENV=$(VENV) PYTHON=$(PYTHON) .ci/test-under-load $(PYTEST_ARGS)
 
 # Benchmarks print tables of figures with ratios to references measured in the
 # same run (see bench/README.md); they assert nothing and take a few minutes.

@@ -25,19 +25,22 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> i
     """
     name = getattr(node_class, "node_name", node_class.__name__)
     argv = list(sys.argv if args is None else args)
-    if not end_with_parent():
-        return 0
-    try:
-        for path in params_files_in(argv):
-            check_params_file(path)
-        rclpy.init(args=argv)
-    except (ValueError, RCLError) as error:
-        print(f"[FATAL] [{name}]: cannot start: {str(error).split(', at ')[0]}",
-              file=sys.stderr)
-        return 2
     node = None
     code = 0
+    # A Ctrl-C is an end in every phase: before rclpy.init() Python raises KeyboardInterrupt;
+    # after it, rclpy's handler shuts the context down and the spin raises
+    # ExternalShutdownException.
     try:
+        if not end_with_parent():
+            return 0
+        try:
+            for path in params_files_in(argv):
+                check_params_file(path)
+            rclpy.init(args=argv)
+        except (ValueError, RCLError) as error:
+            print(f"[FATAL] [{name}]: cannot start: {str(error).split(', at ')[0]}",
+                  file=sys.stderr)
+            return 2
         node = node_class()
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -103,6 +103,37 @@ def wait_quiet(executor, collector, quiet: float = 1.0, timeout: float = 20.0) -
             total, since = now_total, time.monotonic()
 
 
+def scaled(startup_s: float, factor: float = 10.0, floor: float = 30.0) -> float:
+    """A deadline for a wait that follows a start-up of ``startup_s`` measured in the same
+    run: ``factor`` times it, at least ``floor``. It only turns a hang into a failure that
+    says what happened; the test waits for a condition, never for the time."""
+    return max(floor, factor * startup_s)
+
+
+def wait_for_line(process, text: str, timeout: float) -> str | None:
+    """Read ``process``'s output until a line holding ``text``; that line, or None when the
+    process ended or ``timeout`` s passed first (what was read is printed)."""
+    import selectors
+    import time
+
+    deadline = time.monotonic() + timeout
+    read = []
+    with selectors.DefaultSelector() as selector:
+        selector.register(process.stdout, selectors.EVENT_READ)
+        while time.monotonic() < deadline:
+            if not selector.select(timeout=max(0.0, deadline - time.monotonic())):
+                break
+            line = process.stdout.readline()
+            if not line:
+                break
+            if text in line:
+                return line
+            read.append(line)
+    print(f"no {text!r} from {process.args[:3]} in {timeout:.0f} s; it printed:\n"
+          + "".join(read))
+    return None
+
+
 def wait_seconds(executor, seconds: float) -> None:
     """Keep spinning (so subscriptions are served) for a while."""
     spin_until(executor, lambda: False, seconds)

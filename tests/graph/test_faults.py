@@ -12,6 +12,7 @@ from std_msgs.msg import Float64, Float64MultiArray, Int32, Int64, String
 from estimation_nodes.core.tiles import histogram
 from estimation_nodes.core.tiles.models import HistogramModel
 from estimation_nodes.nodes.qos import INPUT_QOS
+from estimation_nodes.tools.replay.estimator import align
 from tests.conftest import SCENARIOS, spin_until
 from tests.graph.graph_tools import (
     beliefs,
@@ -75,7 +76,8 @@ def test_sensor_restarted_mid_run_estimator_keeps_localizing(
     assert spin_until(executor, lambda: sensor.poll() is not None, 10.0)
     # Take in what the old sensor sent just before it ended: its last truth is
     # where the new one must start (seen under load: a stale one shifted the run).
-    wait_seconds(executor, 0.5)
+    # Nothing more can come from a process that has ended once what was on its way is in.
+    wait_until_topic_quiet(executor, seen, "true_position")
     before = seen.count("true_position")
     last_truth = seen.messages["true_position"][-1].data
     # The robot has not moved while its sensor was down: the commander paused.
@@ -83,12 +85,13 @@ def test_sensor_restarted_mid_run_estimator_keeps_localizing(
                            "-p", "seed:=2"))
     wait_for_commander(executor, started, timeout=60.0)
     assert spin_until(executor, lambda: seen.count("true_position") >= 60, 20.0)
-    wait_seconds(executor, 0.5)
     assert started["estimator"].poll() is None, "the estimator died"
     # Counted by the estimator: a belief republished after a late event is no new reading.
     assert spin_until(executor, lambda: diagnostics_values(seen.messages["/diagnostics"][-1])
-                      .get("handled.tile_observation") == "60", 5.0), \
-        "an observation was lost across the restart"
+                      .get("handled.tile_observation") == "60", 20.0), \
+        f"an observation was lost across the restart: {seen.messages['/diagnostics'][-1]}"
+    # Published before the diagnostics that count it, but on another topic: still coming.
+    wait_until_topic_quiet(executor, seen, "belief")
     assert_distributions(beliefs(seen.messages["belief"]))
     corrected, truth = settled_beliefs(seen, before)
     after = hit_rate(corrected, truth)
@@ -97,6 +100,15 @@ def test_sensor_restarted_mid_run_estimator_keeps_localizing(
     print(f"after the sensor restart the most likely cell was the true one in "
           f"{after:.0%} of {len(truth)} steps (estimator: {counters or 'no reordering'})")
     assert len(truth) >= 30 and after >= 0.6
+
+
+def wait_until_topic_quiet(executor, collector, topic: str, quiet: float = 1.0) -> None:
+    """Spin until nothing new has come on ``topic`` for ``quiet`` s."""
+    count, since = collector.count(topic), time.monotonic()
+    while time.monotonic() - since < quiet:
+        executor.spin_once(timeout_sec=0.05)
+        if collector.count(topic) != count:
+            count, since = collector.count(topic), time.monotonic()
 
 
 def test_estimator_killed_and_restarted_comes_back_from_initial_state(
@@ -121,7 +133,9 @@ def test_estimator_killed_and_restarted_comes_back_from_initial_state(
     # of one it would get only the latest of them, not the first from its prior.
     restarted = processes(node_command("estimator", LOCALIZATION, "-p", "history_depth:=1000"))
     wait_for_commander(executor, started, timeout=60.0)
-    wait_seconds(executor, 1.0)
+    # The last readings, and the beliefs they caused, still on their way.
+    for topic in ("tile_observation", "belief"):
+        wait_until_topic_quiet(executor, seen, topic)
     assert restarted.poll() is None and started["tile_sensor"].poll() is None
 
     def published_since_restart(topic):
@@ -153,11 +167,21 @@ def test_estimator_killed_and_restarted_comes_back_from_initial_state(
                       if np.allclose(histogram.correct(uniform, model.likelihood(observed))[0],
                                      new_corrected[0], rtol=0, atol=1e-12)]
     assert first_readings, "the restarted estimator's first belief is not from its prior"
-    assert any(settles_on(new_corrected, causal_corrections(
-        sorted(moves[first_move:] + readings[first_reading:]), model))
-        for first_reading in first_readings
-        for first_move in range(len(moves))), \
-        "no first command and reading after the restart explain the new estimator's beliefs"
+    best = (-1, None)
+    for first_reading in first_readings:
+        for first_move in range(len(moves)):
+            offline = causal_corrections(sorted(moves[first_move:] + readings[first_reading:]),
+                                         model)
+            if settles_on(new_corrected, offline):
+                return
+            matched = align(new_corrected, offline, 1e-12).matched
+            best = max(best, (matched, (first_reading, first_move, len(offline))))
+    matched, (first_reading, first_move, steps) = best
+    pytest.fail(f"no first command and reading after the restart explain the new "
+                f"estimator's beliefs: at best (from reading {first_reading} and command "
+                f"{first_move} of those since the kill) {matched} of {steps} steps settled; "
+                f"{len(new_corrected)} beliefs, {len(moves)} commands and {len(readings)} "
+                f"readings since the kill")
 
 
 def causal_corrections(events, model):
@@ -175,8 +199,6 @@ def causal_corrections(events, model):
 def settles_on(published, offline) -> bool:
     """Whether every offline belief was published, in order, and nothing published after
     the last of them is a belief the filter does not give (see replay.align)."""
-    from estimation_nodes.tools.replay.estimator import align
-
     alignment = align(published, offline, 1e-12)
     return alignment.matched == len(offline) and all(
         index < alignment.last_match for index in alignment.superseded)
@@ -233,8 +255,12 @@ def test_flood_is_handled_or_counted_memory_bounded_then_correct_again(
     assert spin_until(executor, accounted, 60.0), diagnostics_values(
         seen.messages["/diagnostics"][-1])
     values = diagnostics_values(seen.messages["/diagnostics"][-1])
-    assert int(values["rejected.unknown_class"]) == 15
-    assert int(values["rejected.non_finite_measurement"]) == 30
+    # Every bad message rejected, unless DDS lost it on the way (then counted as lost, and
+    # which ones were lost is not known): the estimator's queue is bounded, not the flood.
+    for reason, bad, topic in (("unknown_class", 15, "tile_observation"),
+                               ("non_finite_measurement", 30, "position_measurement")):
+        lost = int(values.get(f"rejected.lost.{topic}", 0))
+        assert bad - lost <= int(values[f"rejected.{reason}"]) <= bad, values
     rss_after = resident_kib(estimator.pid)
     print(f"flood: {sent} events on each of 3 topics; estimator RSS {rss_before} KiB -> "
           f"{rss_after} KiB (+{rss_after - rss_before} KiB); counters {values}")
@@ -265,10 +291,19 @@ def test_flood_is_handled_or_counted_memory_bounded_then_correct_again(
                                [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
 
 
+def wait_for_estimates(executor, collector_factory, readings: int) -> None:
+    """Until the estimator's diagnostics say it has handled ``readings`` readings: it has
+    published its last estimate before it published them."""
+    health = collector_factory({"/diagnostics": (DiagnosticArray, 10)}, name="health")
+    assert spin_until(executor, lambda: health.count("/diagnostics") and diagnostics_values(
+        health.messages["/diagnostics"][-1]).get("handled.tile_observation") == str(readings),
+        30.0), health.messages["/diagnostics"][-1:]
+
+
 def test_late_subscriber_gets_the_latest_estimate(processes, executor, collector_factory):
     started = start_graph(processes, SCENARIOS / "example_6_14.yaml")
     wait_for_commander(executor, started)
-    wait_seconds(executor, 0.5)
+    wait_for_estimates(executor, collector_factory, 3)
     # Joins after the last estimate was published: gets that one, as from /map.
     late = collector_factory({"belief": Float64MultiArray}, name="late_subscriber")
     assert spin_until(executor, lambda: late.count("belief") >= 1, 20.0)
@@ -282,9 +317,12 @@ def test_late_subscriber_gets_a_history_when_asked_for(processes, executor, coll
     started = start_graph(processes, SCENARIOS / "example_6_14.yaml",
                           estimator_args=("-p", "history_depth:=100"))
     wait_for_commander(executor, started)
-    wait_seconds(executor, 0.5)
+    wait_for_estimates(executor, collector_factory, 3)
     late = collector_factory({"belief": Float64MultiArray}, name="late_subscriber")
+    # The whole history: three estimates, and one more for each republished after a late
+    # input; all of it is sent on matching.
     assert spin_until(executor, lambda: late.count("belief") >= 3, 20.0)
+    wait_until_topic_quiet(executor, late, "belief")
     np.testing.assert_allclose(beliefs(late.messages["belief"])[-1],
                                [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
 
@@ -294,6 +332,8 @@ def test_command_publishers_that_come_and_go(processes, executor, context, colle
 
     processes(node_command("estimator", SCENARIOS / "example_6_14.yaml"))
     seen = collector_factory({"belief_predicted": Float64MultiArray})
+    # Matched before the first command: a later subscriber gets only the latest estimate.
+    assert spin_until(executor, seen.all_matched, 30.0)
     for index in range(3):
         publisher_node = Node(f"transient_commander_{index}", context=context)
         executor.add_node(publisher_node)

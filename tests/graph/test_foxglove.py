@@ -173,7 +173,9 @@ def test_a_client_that_never_reads_does_not_hold_up_the_run(ros_env, processes, 
 
     output, received = asyncio.run(connect_and_never_read())
     assert demo.returncode == 0, output
-    assert len(CORRECTED_LINE.findall(output)) == steps, output
+    # One printed line per belief the monitor got: every step's, and one more for each
+    # the estimator published again after a late input.
+    assert len(CORRECTED_LINE.findall(output)) >= steps, output
     assert sum(r.topic == "/belief" for r in received) < steps
 
 

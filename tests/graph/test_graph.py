@@ -59,7 +59,10 @@ def test_source_package_xml_parses():
 
 def test_example_6_14_end_to_end(processes, executor, collector_factory):
     seen = collector_factory({"belief_predicted": Float64MultiArray, "belief": Float64MultiArray})
-    started = start_graph(processes, SCENARIOS / "example_6_14.yaml")
+    # Matched before the first command: the estimator keeps only its latest estimate for a
+    # subscriber that comes later.
+    started = start_graph(processes, SCENARIOS / "example_6_14.yaml",
+                          listeners=(executor, seen))
     wait_for_commander(executor, started)
     assert spin_until(executor, lambda: seen.count("belief") >= 3, 20.0)
     wait_quiet(executor, seen)
@@ -74,7 +77,8 @@ def test_example_6_14_end_to_end(processes, executor, collector_factory):
 
 def test_example_6_18_end_to_end(processes, executor, collector_factory):
     seen = collector_factory({"kalman_estimate": PoseWithCovariance})
-    started = start_graph(processes, SCENARIOS / "example_6_18.yaml")
+    started = start_graph(processes, SCENARIOS / "example_6_18.yaml",
+                          listeners=(executor, seen))
     wait_for_commander(executor, started)
     assert spin_until(executor, lambda: seen.count("kalman_estimate") >= 5, 20.0)
     wait_quiet(executor, seen)
@@ -152,12 +156,13 @@ def test_the_default_run_localizes_and_names_the_book_s_scenarios(ros_env):
 def test_a_node_that_cannot_start_ends_the_demo_at_once(ros_env, tmp_path):
     bad = tmp_path / "bad.yaml"
     bad.write_text("/**/estimator:\n  ros__parameters:\n    kalman:\n      var_u: -1.0\n")
-    started = time.monotonic()
-    result = subprocess.run([executable("estimation_demo"), "--params-file", str(bad)],
-                            env=ros_env, capture_output=True, text=True, timeout=60)
+    # At once, not after --timeout (which would end it with 1, "--timeout reached"):
+    # the run ends when a node does.
+    result = subprocess.run([executable("estimation_demo"), "--params-file", str(bad),
+                             "--timeout", "3600"], env=ros_env, capture_output=True,
+                            text=True, timeout=120)
     assert result.returncode == 2, result.stdout + result.stderr
     assert "kalman.var_u" in result.stderr and "Traceback" not in result.stderr
-    assert time.monotonic() - started < 30   # not the 600 s --timeout
 
 
 def test_demo_in_process_reproduces_example_6_18(ros_env):
@@ -219,25 +224,6 @@ def test_demo_ctrl_c_leaves_no_process_behind(ros_env, domain_id):
             demo.wait()
 
 
-def test_ctrl_c_in_a_terminal_ends_every_process_quietly(ros_env, domain_id):
-    """A terminal's Ctrl-C signals the whole foreground process group at once."""
-    demo, children = start_demo(ros_env, "--scenario", "book_world", "--settle", "0.5",
-                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-                                start_new_session=True)
-    try:
-        assert len(children) == 3
-        time.sleep(1.0)   # the nodes are up and running, as a user would see them
-        os.killpg(demo.pid, signal.SIGINT)
-        output, _ = demo.communicate(timeout=30)
-        assert demo.returncode == 130, output
-        assert "Traceback" not in output, output
-        assert not [child for child in children if running(child)]
-    finally:
-        if demo.poll() is None:
-            demo.kill()
-            demo.wait()
-
-
 def test_nodes_end_when_the_demo_is_killed(ros_env):
     # SIGKILL gives the demo no chance to stop its children: they must end on their
     # own rather than run on, publishing into whatever next uses the domain.
@@ -292,21 +278,6 @@ def test_two_robots_in_namespaces_do_not_mix(processes, executor, collector_fact
     assert {len(m.data) for m in seen.messages["/robot2/belief"]} == {20}
     np.testing.assert_allclose(beliefs(seen.messages["/robot1/belief"])[-1],
                                [0.048443, 0.063322, 0.244983, 0.528374, 0.114879], atol=1e-6)
-
-
-@pytest.mark.parametrize("name", ["estimator", "tile_sensor", "motion_commander"])
-def test_ctrl_c_ends_a_node_cleanly(processes, executor, collector_factory, name):
-    from tests.graph.graph_tools import node_command
-
-    node = processes(node_command(name, SCENARIOS / "example_6_14.yaml"))
-    watcher = collector_factory({}, name="watcher")
-    # Up once the graph shows it (its parameters are declared before its entities).
-    assert spin_until(executor, lambda: name in watcher.node.get_node_names(), 20.0)
-    spin_until(executor, lambda: False, 0.5)
-    node.send_signal(signal.SIGINT)
-    output, _ = node.communicate(timeout=20)
-    assert node.returncode == 0, output
-    assert "Traceback" not in output
 
 
 @pytest.mark.parametrize("name, message", [

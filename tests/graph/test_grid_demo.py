@@ -22,13 +22,18 @@ def test_the_grid_demo_finds_the_robot_and_records_the_run(ros_env, tmp_path):
     demo = subprocess.run([executable("estimation_demo"), "--params-file", str(params),
                            "--record", str(recording), "--linger", "0.5"], env=ros_env,
                           capture_output=True, text=True, timeout=150)
-    print(demo.stdout[-3000:])
-    assert demo.returncode == 0, demo.stdout + demo.stderr
+    shown = demo.stdout[-4000:] + demo.stderr[-2000:]
+    assert demo.returncode == 0, shown
     near, updates = (int(v) for v in re.search(
         r"within 0\.3 m and 10 deg of the truth in (\d+) of (\d+) updates", demo.stdout).groups())
-    assert updates >= 10 and near / updates >= 0.8
+    # The robot starts once the localizer is ready, and an update is due every 0.25 m of
+    # its 7 m (14 s at 0.5 m/s): some 30, whatever the machine's speed; fewer means scans
+    # were left out for want of time (allowed) for most of the run.
+    assert updates >= 10, shown
+    # Found from a uniform belief, and again after the kidnap, within a few updates.
+    assert near / updates >= 0.8, shown
     last_quality = float(re.search(r"at the last (\d\.\d+)", demo.stdout).group(1))
-    assert last_quality > 0.9
+    assert last_quality > 0.9, shown
     with recording.open("rb") as stream:
         summary = make_reader(stream).get_summary()
     channels = {c.topic: summary.schemas[c.schema_id].name for c in summary.channels.values()}

@@ -9,14 +9,14 @@ offline over the recorded inputs in the order they were published.
 
 from __future__ import annotations
 
-import subprocess
 import sys
+import time
 
 import pytest
 
 from estimation_nodes.tools.demo.graph_runtime import stop_process
 from tests.conftest import REPO, SCENARIOS
-from tests.graph.graph_tools import node_command
+from tests.graph.graph_tools import node_command, scaled, wait_for_line
 from tests.graph.test_two_hosts import compared, replayed
 
 #: The recorder's node (tests/graph/record_run.py runs the demo's monitor).
@@ -33,9 +33,11 @@ def test_seeded_run_under_cpu_load_equals_the_causal_filter(processes, tmp_path)
     try:
         recording = tmp_path / "run.mcap"
         # The recorder first: it matches the sensor long before the estimator exists.
+        started = time.monotonic()
         recorder = processes([sys.executable, "-m", "tests.graph.record_run", str(recording),
-                              str(scenario)], cwd=REPO)
+                              str(scenario), "40"], cwd=REPO)
         assert "recording" in recorder.stdout.readline()
+        startup = time.monotonic() - started
         # The recorder must get every input too: the sensor and the commander wait for it
         # as they wait for the estimator.
         processes(node_command("tile_sensor", scenario, "-p", f"hold_for_nodes:={RECORDED}"))
@@ -46,10 +48,12 @@ def test_seeded_run_under_cpu_load_equals_the_causal_filter(processes, tmp_path)
         estimator = processes(node_command("estimator", scenario,
                                            "-p", "history_depth:=1000"))
         assert commander.wait(timeout=120) == 0, commander.stdout.read()
+        # Until every estimate has reached the recorder (a miss: the replay below says
+        # which are missing).
+        wait_for_line(recorder, "settled", scaled(startup))
     finally:
         for hog in hogs:
             stop_process(hog, grace=1.0)
-    subprocess.run(["sleep", "2"], check=True)
     assert estimator.poll() is None, "the estimator died"
     stop_process(recorder, grace=10.0)
     output = replayed(recording)

@@ -22,7 +22,7 @@ from estimation_nodes.tools.demo.graph_runtime import stop_process
 from estimation_nodes.tools.recording.mcap import read_recording
 from tests.conftest import REPO, SCENARIOS
 from tests.graph import hosts
-from tests.graph.graph_tools import executable, node_command
+from tests.graph.graph_tools import executable, node_command, scaled, wait_for_line
 
 pytestmark = pytest.mark.skipif(hosts.available() is not None,
                                 reason=str(hosts.available()))
@@ -50,10 +50,10 @@ def two_hosts(domain_id):
     pair.remove()
 
 
-def start_run(processes, ros_env, pair, scenario: Path, tmp_path: Path, *commander_args,
-              static_peers: bool = False):
-    """Estimator on a; recorder, sensor and commander on b. Returns (commander, recorder,
-    recording path)."""
+def start_run(processes, ros_env, pair, scenario: Path, tmp_path: Path, steps: int,
+              *commander_args, static_peers: bool = False):
+    """Estimator on a; recorder, sensor and commander on b, ``steps`` commands. Returns
+    (commander, recorder, recording path, estimator)."""
 
     def on(host, command):
         env = pair.environment(ros_env, static_peer_of=host if static_peers else None)
@@ -62,7 +62,7 @@ def start_run(processes, ros_env, pair, scenario: Path, tmp_path: Path, *command
     estimator = on("a", node_command("estimator", scenario, *ESTIMATOR_ARGS))
     recording = tmp_path / "run.mcap"
     recorder = on("b", [sys.executable, "-m", "tests.graph.record_run", str(recording),
-                        str(scenario)])
+                        str(scenario), str(steps)])
     assert "recording" in recorder.stdout.readline()
     # The recorder must get every input too: the sensor and the commander wait for it as
     # they wait for the estimator.
@@ -73,7 +73,7 @@ def start_run(processes, ros_env, pair, scenario: Path, tmp_path: Path, *command
     return commander, recorder, recording, estimator
 
 
-def wait_until_sending(commander: subprocess.Popen, timeout: float = 60.0) -> float:
+def wait_until_sending(commander: subprocess.Popen, timeout: float = 120.0) -> float:
     """Read the commander's log until it starts sending; the time it did."""
     deadline = time.monotonic() + timeout
     for line in commander.stdout:
@@ -83,9 +83,11 @@ def wait_until_sending(commander: subprocess.Popen, timeout: float = 60.0) -> fl
     raise AssertionError("the commander ended before sending")
 
 
-def finish(commander, recorder, estimator, settle: float = 3.0) -> None:
+def finish(commander, recorder, estimator, startup: float) -> None:
+    """Once the commander is done and the recorder has every estimate (record_run's
+    "settled"; a miss: the replay says which are missing), stop the recorder."""
     assert commander.wait(timeout=120) == 0, commander.stdout.read()
-    time.sleep(settle)        # what is still on its way to the recorder
+    wait_for_line(recorder, "settled", scaled(startup))
     assert estimator.poll() is None, "the estimator died"
     stop_process(recorder, grace=10.0)
 
@@ -114,11 +116,11 @@ def test_example_6_14_across_two_hosts_is_the_book(two_hosts, processes, ros_env
         for host in ("a", "b"):
             subprocess.run(["ip", "-n", two_hosts.names[host], "route", "del",
                             hosts.MULTICAST], capture_output=True, check=False)
+    began = time.monotonic()
     commander, recorder, recording, estimator = start_run(
-        processes, ros_env, two_hosts, SCENARIOS / "example_6_14.yaml", tmp_path,
+        processes, ros_env, two_hosts, SCENARIOS / "example_6_14.yaml", tmp_path, 3,
         static_peers=static_peers)
-    wait_until_sending(commander)
-    finish(commander, recorder, estimator)
+    finish(commander, recorder, estimator, wait_until_sending(commander) - began)
     output = replayed(recording)
     assert compared(output, "belief") == 3
     run = read_recording(recording).record
@@ -130,8 +132,9 @@ def test_example_6_14_across_two_hosts_is_the_book(two_hosts, processes, ros_env
 def test_seeded_run_across_hosts_equals_the_causal_filter(two_hosts, processes, ros_env,
                                                           tmp_path, outage):
     """The localization scenario at 4 Hz, its link cut for ``outage`` s 3 s into the run."""
+    began = time.monotonic()
     commander, recorder, recording, estimator = start_run(
-        processes, ros_env, two_hosts, SCENARIOS / "localization.yaml", tmp_path)
+        processes, ros_env, two_hosts, SCENARIOS / "localization.yaml", tmp_path, 40)
     started = wait_until_sending(commander)
     if outage:
         time.sleep(max(0.0, started + 3.0 - time.monotonic()))
@@ -140,7 +143,7 @@ def test_seeded_run_across_hosts_equals_the_causal_filter(two_hosts, processes, 
         time.sleep(outage)
         two_hosts.heal()
         healed_ns = time.time_ns()
-    finish(commander, recorder, estimator, settle=5.0 if outage else 3.0)
+    finish(commander, recorder, estimator, started - began)
     output = replayed(recording)
     # Every reading the sensor sent was applied: 40 corrections, all equal to the filter
     # run offline in the order the events happened.

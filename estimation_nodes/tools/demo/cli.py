@@ -12,9 +12,8 @@ from __future__ import annotations
 import argparse
 import os
 import re
-import subprocess
+import signal
 import sys
-import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -23,27 +22,20 @@ import yaml
 from estimation_nodes.params import topics
 from estimation_nodes.params.param_files import check_params_file
 from estimation_nodes.tools.demo.graph_runtime import (
-    run_until_done,
+    INTERRUPTED,
+    HeldInterrupts,
+    NodeStart,
+    run_graph,
     spin_until,
-    start_node,
-    stop_children,
 )
 from estimation_nodes.tools.installed import share_dirs
 from estimation_nodes.tools.live_view.server import LiveViewError, parse_address
 from estimation_nodes.tools.recording.mcap import RecordingError
 from estimation_nodes.tools.recording.run_record import RunRecord, summarize
 
-NODE_MODULES = {
-    "estimator": "estimation_nodes.nodes.estimator",
-    "tile_sensor": "estimation_nodes.nodes.tile_sensor",
-    "linear_system": "estimation_nodes.nodes.linear_system",
-    "motion_commander": "estimation_nodes.nodes.motion_commander",
-}
 #: A run where localization visibly succeeds; the book's own world and examples are
 #: other scenarios, named in the summary.
 DEFAULT_SCENARIO = "localization"
-#: Start order: the commander last, so it finds the others soonest.
-START_ORDER = ("estimator", "simulator", "motion_commander")
 #: Subscribers the commander waits for: the sensor, the estimator and this script's monitor.
 REQUIRED_SUBSCRIBERS = 3
 
@@ -152,27 +144,37 @@ def commander_overrides(settle: float, exit_when_done: bool) -> list[str]:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
+    """The demo; a Ctrl-C in any phase ends it with exit code 130 and no traceback."""
+    try:
+        code = run_demo(argv)
+    except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # the end has begun
+        code = INTERRUPTED
+    sys.exit(code)
+
+
+def run_demo(argv: Sequence[str] | None) -> int:
     args = parse_args(argv)
     try:
         params = checked_params_file(args.params_file or find_scenario(args.scenario))
         args.foxglove = foxglove_address(args.foxglove)   # (host, port) from here on
     except DemoError as error:
         print(f"estimation_demo: {error}", file=sys.stderr)
-        sys.exit(2)
+        return 2
     env = ros_environment()
     os.environ.update(env)
     print(f"estimation_demo: parameters from {params}")
     if simulator_for(params) == "planar_robot":
-        sys.exit(run_grid_scenario(params, args))
+        return run_grid_scenario(params, args)
     runner = run_in_process if args.in_process else run_processes
     try:
         code, record = runner(params, args)
     except RecordingError as error:
         print(f"estimation_demo: {error}", file=sys.stderr)
-        sys.exit(2)
+        return 2
     except LiveViewError as error:
         print(f"estimation_demo: --foxglove: {error}", file=sys.stderr)
-        sys.exit(2)
+        return 2
     print(summarize(record))
     print(other_scenarios(params))
     if args.record:
@@ -181,7 +183,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         from estimation_nodes.tools.plot.estimator import render
 
         print(f"estimation_demo: plot written to {render(record, args.plot)}")
-    sys.exit(code)
+    return code
 
 
 def foxglove_address(text: str | None) -> tuple[str, int] | None:
@@ -279,68 +281,46 @@ def make_monitor(args: argparse.Namespace, sinks: list):
 
 
 def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecord]:
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-
-    processes: dict[str, subprocess.Popen] = {}
-    rclpy.init()
-    executor = SingleThreadedExecutor()
-    monitor = None
-    sinks: list = []
-    code = 0
+    """The estimator, the simulator, then the commander, each a process of its own."""
+    simulator = simulator_for(params)
+    heard = topics.ESTIMATOR_OUTPUTS + topics.SIMULATOR_OUTPUTS[simulator]
+    sinks = make_sinks(params, args)
     try:
-        sinks = make_sinks(params, args)
-        monitor = make_monitor(args, sinks)
-        executor.add_node(monitor)
-        deadline = time.monotonic() + args.timeout
-        simulator = simulator_for(params)
-        heard = topics.ESTIMATOR_OUTPUTS + topics.SIMULATOR_OUTPUTS[simulator]
-        for role in START_ORDER:
-            name = simulator if role == "simulator" else role
-            if name == "motion_commander":
-                # The monitor must hear the simulator's and the estimator's first messages;
-                # a node that ended (a bad parameter) ends the wait and the run.
-                spin_until(executor, lambda: monitor.publishers_matched(heard) or any(
-                    p.poll() is not None for p in processes.values()),
-                    deadline - time.monotonic())
-                if any(p.poll() is not None for p in processes.values()):
-                    break
-            overrides = (commander_overrides(args.settle, exit_when_done=True)
-                         if name == "motion_commander" else [])
-            processes[name] = start_node(NODE_MODULES[name], params, *overrides)
-        code = run_until_done(executor, processes, "motion_commander", deadline, args.linger)
-    except KeyboardInterrupt:
-        print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
-        code = 130
+        code, monitor = run_graph(params, lambda: make_monitor(args, sinks), [
+            NodeStart("estimator"),
+            NodeStart(simulator),
+            # Last, so it finds the others soonest; once the monitor hears the simulator's
+            # and the estimator's first messages.
+            NodeStart("motion_commander", tuple(commander_overrides(args.settle, True)),
+                      ready=lambda monitor: monitor.publishers_matched(heard)),
+        ], "motion_commander", args.timeout, args.linger)
     finally:
-        stop_children(processes.values())
-        if monitor is not None:
-            monitor.destroy_node()
         close_sinks(sinks)
-        executor.shutdown()
-        rclpy.try_shutdown()
     return code, monitor.record if monitor is not None else RunRecord()
 
 
 def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunRecord]:
     import rclpy
-    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
 
     from estimation_nodes.nodes.estimator import Estimator
     from estimation_nodes.nodes.linear_system import LinearSystem
     from estimation_nodes.nodes.motion_commander import MotionCommander
     from estimation_nodes.nodes.parameters import ConfigurationError
-    from estimation_nodes.nodes.process import ignore_further_interrupts
     from estimation_nodes.nodes.tile_sensor import TileSensor
 
     ros_args = ["--ros-args", "--params-file", str(params),
                 *commander_overrides(args.settle, exit_when_done=False)]
-    rclpy.init(args=["estimation_demo", *ros_args])
-    executor = SingleThreadedExecutor()
+    executor = None
     nodes = []
     sinks: list = []
     code = 0
     try:
+        # Without rclpy's signal handler, as run_graph (graph_runtime.py) says why.
+        rclpy.init(args=["estimation_demo", *ros_args],
+                   signal_handler_options=SignalHandlerOptions.NO)
+        executor = SingleThreadedExecutor()
         sinks = make_sinks(params, args)
         nodes.append(make_monitor(args, sinks))
         simulator = LinearSystem if simulator_for(params) == "linear_system" else TileSensor
@@ -359,15 +339,19 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     except ConfigurationError as error:
         print(f"estimation_demo: invalid parameter {error}", file=sys.stderr)
         code = 2
-    except KeyboardInterrupt:
-        code = 130
+    except (KeyboardInterrupt, ExternalShutdownException):
+        code = INTERRUPTED
     finally:
-        ignore_further_interrupts()
-        for node in nodes:
-            node.destroy_node()
-        close_sinks(sinks)
-        executor.shutdown()
-        rclpy.try_shutdown()
+        with HeldInterrupts() as held:
+            for node in nodes:
+                node.destroy_node()
+            close_sinks(sinks)
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
+            rclpy.try_shutdown()
+        if held.noted or code == INTERRUPTED:
+            code = INTERRUPTED
+            signal.signal(signal.SIGINT, signal.SIG_IGN)   # the summary is printed whole
     return code, nodes[0].record if nodes else RunRecord()
 
 

@@ -1,5 +1,5 @@
 """Running a graph from a script or a test: spin until something holds, start and end child
-node processes."""
+node processes, and the demo's one run block (``run_graph``) with its Ctrl-C handling."""
 
 from __future__ import annotations
 
@@ -8,9 +8,13 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+#: The exit code of a run ended by Ctrl-C: the shell's for an end by SIGINT.
+INTERRUPTED = 130
 
 
 def spin_until(executor: Any, done: Callable[[], bool], timeout: float) -> bool:
@@ -36,30 +40,127 @@ def stop_process(process: subprocess.Popen, grace: float = 5.0) -> int:
     return process.returncode
 
 
-def start_node(module: str, params: Path, *overrides: str) -> subprocess.Popen:
-    """One of the package's nodes (``python -m module``) as a child of this process, with
-    its parameter file and ``overrides`` (ROS arguments).
+def start_node(name: str, params: Path, *overrides: str) -> subprocess.Popen:
+    """The package's node ``name`` (nodes/start.py) as a child of this process, with its
+    parameter file and ``overrides`` (ROS arguments).
 
     The child ends with this process even if it is killed (nodes/process.end_with_parent),
     and runs in a process group of its own: a terminal's Ctrl-C then reaches this process
-    alone, which stops each child with exactly one SIGINT (``stop_children``).
+    alone, which stops each child with exactly one SIGINT (``stop_children``). It starts in
+    nodes/start.py, so that this SIGINT ends it quietly even while it is still loading.
     """
     from estimation_nodes.nodes.process import PARENT_PID_ENV
 
-    command = [sys.executable, "-m", module, "--ros-args", "--params-file", str(params),
-               *overrides]
-    return subprocess.Popen(command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())},
-                            process_group=0)
+    command = [sys.executable, "-m", "estimation_nodes.nodes.start", name, "--ros-args",
+               "--params-file", str(params), *overrides]
+    # The child inherits this thread's signal mask: with SIGINT blocked, a stop sent while
+    # Python is still starting up (before any code of ours could take it; it would print
+    # "Fatal Python error") waits until nodes/start.py unblocks it.
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        return subprocess.Popen(command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())},
+                                process_group=0)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 def stop_children(processes: Iterable[subprocess.Popen]) -> None:
-    """End the children started with ``start_node``, the last started first, once further
-    Ctrl-Cs no longer interrupt this process's own shutdown."""
-    from estimation_nodes.nodes.process import ignore_further_interrupts
-
-    ignore_further_interrupts()
+    """End the children started with ``start_node``, the last started first."""
     for process in reversed(list(processes)):
         stop_process(process)
+
+
+class HeldInterrupts:
+    """While the block runs, a Ctrl-C (SIGINT) is noted instead of raised, so that what the
+    block does is done whole: a child started is a child known, a stop is a stop of all.
+
+    ``noted`` says whether one came; the handler in place before comes back at the end.
+    """
+
+    def __init__(self) -> None:
+        self.noted = False
+        self._previous: Any = None
+
+    def __enter__(self) -> HeldInterrupts:
+        self._previous = signal.signal(signal.SIGINT, self._note)
+        return self
+
+    def _note(self, _signum: int, _frame: Any) -> None:
+        self.noted = True
+
+    def __exit__(self, *_exc: object) -> None:
+        signal.signal(signal.SIGINT, self._previous)
+
+
+@dataclass(frozen=True)
+class NodeStart:
+    """One node of a run: its executable name and ROS arguments, started once ``ready``
+    (given the monitor) holds; None: at once."""
+
+    name: str
+    overrides: tuple[str, ...] = ()
+    ready: Callable[[Any], bool] | None = None
+
+
+def run_graph(params: Path, make_monitor: Callable[[], Any], starts: Sequence[NodeStart],
+              main: str, timeout: float, linger: float) -> tuple[int, Any]:
+    """The demo's run: start each of ``starts`` in turn, watched by the node that
+    ``make_monitor`` makes, until ``main`` ends (then ``linger`` s more); then end every
+    child by its pid. Returns the exit code (``run_until_done``'s, or 130 after a Ctrl-C)
+    and the monitor (None if it could not be made).
+
+    A Ctrl-C in any phase ends the run the same way: the children started so far are
+    stopped, none is left behind, nothing is printed but one line. rclpy's own signal
+    handler is left out: it would shut the context down under the run, and the spin would
+    raise ExternalShutdownException instead of KeyboardInterrupt.
+    """
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+
+    processes: dict[str, subprocess.Popen] = {}
+    executor = monitor = None
+    code = 0
+    try:
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        executor = SingleThreadedExecutor()
+        monitor = make_monitor()
+        executor.add_node(monitor)
+        deadline = time.monotonic() + timeout
+
+        def any_ended() -> bool:
+            return any(p.poll() is not None for p in processes.values())
+
+        for start in starts:
+            if start.ready is not None:
+                # A node that ended (a bad parameter) ends the wait and the run.
+                spin_until(executor, lambda s=start: s.ready(monitor) or any_ended(),
+                           deadline - time.monotonic())
+                if any_ended():
+                    break
+            with HeldInterrupts() as held:
+                processes[start.name] = start_node(start.name, params, *start.overrides)
+            if held.noted:
+                raise KeyboardInterrupt
+        code = run_until_done(executor, processes, main, deadline, linger)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        code = INTERRUPTED
+    finally:
+        with HeldInterrupts() as held:
+            if code == INTERRUPTED:
+                print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
+            stop_children(processes.values())
+            if monitor is not None:
+                monitor.destroy_node()
+            if executor is not None:
+                executor.shutdown(timeout_sec=1.0)
+            rclpy.try_shutdown()
+        if held.noted:
+            code = INTERRUPTED
+        if code == INTERRUPTED:
+            # The end has begun: the summary is printed whole, a second Ctrl-C is ignored.
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+    return code, monitor
 
 
 def run_until_done(executor: Any, processes: dict[str, subprocess.Popen], main: str,

@@ -1,8 +1,10 @@
 """The demo's grid localization run: planar_robot and grid_localizer, watched and summarized.
 
 Started by estimation_demo for a scenario with a ``planar_robot`` section
-(msgs_config/grid_localization.yaml). The localizer starts first, then the
-simulated robot, which ends itself after its ``duration``; a monitor here
+(msgs_config/grid_localization.yaml). The localizer starts first; the
+simulated robot, once the localizer has published its first estimate (its map
+and kernels are loaded: several seconds on a first run), and it ends itself
+after its ``duration``; a monitor here
 prints each update (the estimate's error to the truth at the scan's time,
 the localization quality, the belief's entropy from /diagnostics) and a
 summary, and records every topic with ``--record``.
@@ -11,17 +13,19 @@ summary, and records every topic with ``--record``.
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from estimation_nodes.params import topics
-from estimation_nodes.tools.demo.graph_runtime import run_until_done, start_node, stop_children
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+from rclpy.node import Node
+from std_msgs.msg import Float64
 
-NODE_MODULES = {"grid_localizer": "estimation_nodes.nodes.grid_localizer",
-                "planar_robot": "estimation_nodes.nodes.planar_robot"}
+from estimation_nodes.nodes.grid_messages import planar_pose
+from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.params import topics
+from estimation_nodes.tools.demo.graph_runtime import NodeStart, run_graph
 #: Within this of the truth an update counts as localized (the issue's 0.3 m and 10 deg).
 NEAR_M, NEAR_DEG = 0.3, 10.0
 
@@ -51,33 +55,26 @@ def grid_topic_types() -> dict[str, str]:
     return {f"/{t}" if not t.startswith("/") else t: n for t, n in topics.GRID_TOPIC_TYPES.items()}
 
 
-class GridMonitor:
+class GridMonitor(Node):
     """Subscribes to the run's grid topics; prints and keeps each update; feeds raw sinks."""
 
     def __init__(self, quiet: bool, sinks: list) -> None:
-        from diagnostic_msgs.msg import DiagnosticArray
-        from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
-        from rclpy.node import Node
-        from std_msgs.msg import Float64
-
-        from estimation_nodes.nodes.qos import latched_qos
-
-        self.node = Node("estimation_demo_grid_monitor")
+        super().__init__("estimation_demo_grid_monitor")
         self.record = GridRecord()
+        #: Whether the localizer has published an estimate: it is ready for the robot.
+        self.localizer_ready = False
         self._quiet, self._sinks = quiet, sinks
         self._truth: dict[tuple[int, int], tuple[float, float, float]] = {}
         self._quality = float("nan")
         self._entropy = float("nan")
         self._started = time.monotonic()
-        self.node.create_subscription(PoseStamped, topics.TRUE_POSE, self._on_truth,
-                                      latched_qos(1000))
-        self.node.create_subscription(PoseWithCovarianceStamped, topics.POSE, self._on_pose,
-                                      latched_qos(1000))
-        self.node.create_subscription(Float64, topics.LOCALIZATION_QUALITY,
-                                      lambda m: setattr(self, "_quality", m.data),
-                                      latched_qos(1000))
-        self.node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS,
-                                      self._on_diagnostics, 10)
+        self.create_subscription(PoseStamped, topics.TRUE_POSE, self._on_truth,
+                                 latched_qos(1000))
+        self.create_subscription(PoseWithCovarianceStamped, topics.POSE, self._on_pose,
+                                 latched_qos(1000))
+        self.create_subscription(Float64, topics.LOCALIZATION_QUALITY,
+                                 lambda m: setattr(self, "_quality", m.data), latched_qos(1000))
+        self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, 10)
         if sinks:
             self._raw_subscriptions()
 
@@ -86,8 +83,8 @@ class GridMonitor:
 
         for topic, type_name in grid_topic_types().items():
             qos = 10 if topic in ("/scan", "/odom") else observer_qos(topic)
-            self.node.create_subscription(message_class(type_name), topic,
-                                          self._forward(topic), qos, raw=True)
+            self.create_subscription(message_class(type_name), topic, self._forward(topic),
+                                     qos, raw=True)
 
     def _forward(self, topic: str):
         def on_raw(data: bytes, info: dict) -> None:
@@ -97,8 +94,6 @@ class GridMonitor:
         return on_raw
 
     def _on_truth(self, msg) -> None:
-        from estimation_nodes.nodes.grid_messages import planar_pose
-
         self._truth[(msg.header.stamp.sec, msg.header.stamp.nanosec)] = planar_pose(msg.pose)
 
     def _on_diagnostics(self, msg) -> None:
@@ -108,8 +103,7 @@ class GridMonitor:
                     self._entropy = float(pair.value)
 
     def _on_pose(self, msg) -> None:
-        from estimation_nodes.nodes.grid_messages import planar_pose
-
+        self.localizer_ready = True
         truth = self._truth.get((msg.header.stamp.sec, msg.header.stamp.nanosec))
         if truth is None:
             return                     # before the robot moved: no truth for that time
@@ -126,28 +120,11 @@ class GridMonitor:
 
 
 def run(params: Path, args, sinks: list) -> tuple[int, GridRecord]:
-    """Start the localizer and the robot, watch until the robot's duration is over."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-
-    processes: dict[str, subprocess.Popen] = {}
-    rclpy.init()
-    executor = SingleThreadedExecutor()
-    monitor = GridMonitor(args.quiet, sinks)
-    executor.add_node(monitor.node)
-    code = 0
-    try:
-        deadline = time.monotonic() + args.timeout
-        processes["grid_localizer"] = start_node(NODE_MODULES["grid_localizer"], params)
-        processes["planar_robot"] = start_node(NODE_MODULES["planar_robot"], params,
-                                               "-p", "exit_when_done:=true")
-        code = run_until_done(executor, processes, "planar_robot", deadline, args.linger)
-    except KeyboardInterrupt:
-        print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
-        code = 130
-    finally:
-        stop_children(processes.values())
-        monitor.node.destroy_node()
-        executor.shutdown()
-        rclpy.try_shutdown()
-    return code, monitor.record
+    """Start the localizer, then the robot once the localizer is ready; watch until the
+    robot's duration is over."""
+    code, monitor = run_graph(params, lambda: GridMonitor(args.quiet, sinks), [
+        NodeStart("grid_localizer"),
+        NodeStart("planar_robot", ("-p", "exit_when_done:=true"),
+                  ready=lambda monitor: monitor.localizer_ready),
+    ], "planar_robot", args.timeout, args.linger)
+    return code, monitor.record if monitor is not None else GridRecord()

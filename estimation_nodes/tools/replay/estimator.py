@@ -84,26 +84,44 @@ class Alignment:
 
 
 def align(online: list, offline: list, tolerance: float) -> Alignment:
-    """Walk the online estimates: each equals the next offline one, or an earlier one (the
-    estimator went back after a late event and publishes those steps again), or none
-    (a provisional estimate, superseded by what follows)."""
+    """Walk the online estimates: each equals the next offline one, or starts the estimator's
+    republication of earlier steps after a late event, or is neither (a provisional
+    estimate, superseded by what follows).
+
+    A republication goes from the step it starts at on to every step applied before it,
+    published one after another: an estimate that equals an earlier step is taken as one
+    only when the estimates after it go on with that step's successors up to where the
+    walk was. Alone, the equality can be chance: a provisional belief made of readings
+    without their moves (a restarted estimator's) can equal an earlier step's, and taking
+    it for a republication left every later step unmatched.
+    """
     offline_arrays = [np.asarray(value, float) for value in offline]
+    online_arrays = [np.asarray(value, float) for value in online]
+
+    def equal(online_index: int, step: int) -> bool:
+        return _difference(online_arrays[online_index], offline_arrays[step]) <= tolerance
+
+    def republishes(index: int, step: int, expected: int) -> bool:
+        run = range(step + 1, expected)
+        return index + len(run) < len(online_arrays) and all(
+            equal(index + offset, later) for offset, later in enumerate(run, start=1))
+
     expected, last_match, worst = 0, -1, 0.0
     superseded: list[int] = []
     settled: list[int] = []
-    for index, value in enumerate(online):
-        value = np.asarray(value, float)
-        candidates = ([expected] if expected < len(offline_arrays) else []) + \
-            list(range(expected - 1, -1, -1))
-        for step in candidates:
-            error = _difference(value, offline_arrays[step])
-            if error <= tolerance:
-                worst = max(worst, error)
-                expected, last_match = step + 1, index
-                settled[step:] = [index]
-                break
+    for index, value in enumerate(online_arrays):
+        if expected < len(offline_arrays) and equal(index, expected):
+            step = expected
         else:
+            step = next((earlier for earlier in range(expected - 1, -1, -1)
+                         if equal(index, earlier) and republishes(index, earlier, expected)),
+                        None)
+        if step is None:
             superseded.append(index)
+            continue
+        worst = max(worst, _difference(value, offline_arrays[step]))
+        expected, last_match = step + 1, index
+        settled[step:] = [index]
     return Alignment(expected, superseded, last_match, worst, settled)
 
 

@@ -1,0 +1,116 @@
+"""Where each node's process starts: a Ctrl-C ends it quietly from its first line on.
+
+A node's module imports rclpy, numpy and the core before its ``main()`` runs:
+a few tenths of a second, more under load, in which a Ctrl-C raised
+KeyboardInterrupt out of an import (Python's traceback, and the process killed
+by SIGINT). The console scripts (what ``ros2 run`` runs) and the demo's
+children therefore start here; this module imports nothing heavy, and a Ctrl-C
+before the node's own ``main()`` has begun ends the process (once the import is
+done) with exit code 0, as a Ctrl-C of a running node does (process.run).
+
+    python -m estimation_nodes.nodes.start estimator --ros-args --params-file FILE
+
+What comes before this module, Python's own start-up (some 40 ms), is not ours
+to handle; the demo starts its children with SIGINT blocked
+(tools/demo/graph_runtime.start_node), so a Ctrl-C then waits for this module,
+which unblocks it.
+"""
+
+from __future__ import annotations
+
+import importlib
+import signal
+import sys
+from collections.abc import Callable
+from typing import Any
+
+#: Each node's executable and the module that holds its ``main()``.
+NODE_MODULES = {
+    "estimator": "estimation_nodes.nodes.estimator",
+    "tile_sensor": "estimation_nodes.nodes.tile_sensor",
+    "linear_system": "estimation_nodes.nodes.linear_system",
+    "motion_commander": "estimation_nodes.nodes.motion_commander",
+    "grid_localizer": "estimation_nodes.nodes.grid_localizer",
+    "planar_robot": "estimation_nodes.nodes.planar_robot",
+    "ekf_localizer": "estimation_nodes.nodes.ekf_localizer",
+    "landmark_robot": "estimation_nodes.nodes.landmark_robot",
+}
+
+
+def run_main(module: str, interrupted_code: int) -> None:
+    """Import ``module`` and call its ``main()``; a Ctrl-C during the import ends the
+    process, once the import is done, with ``interrupted_code`` and nothing printed.
+
+    The handler only notes the Ctrl-C: raised in the middle of an import, an exception
+    came out as another error (numpy's C extension: ImportError "could not import module
+    datetime") or was swallowed with a traceback ("Exception ignored in" a weakref
+    callback of importlib) and the node ran on.
+    """
+    interrupted = False
+
+    def note(_signum: int, _frame: Any) -> None:
+        nonlocal interrupted
+        interrupted = True
+
+    # A process started with SIGINT ignored (a background job) keeps it so.
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        importlib.import_module(module).main()
+        return
+    signal.signal(signal.SIGINT, note)
+    # One that came while Python was starting (the demo starts its children with SIGINT
+    # blocked) arrives now.
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+    main: Callable[[], None] = importlib.import_module(module).main
+    if interrupted:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # the end has begun
+        sys.exit(interrupted_code)
+    # From here on the program's own handling: KeyboardInterrupt, then rclpy's handler.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    main()
+
+
+def estimator() -> None:
+    run_main(NODE_MODULES["estimator"], 0)
+
+
+def tile_sensor() -> None:
+    run_main(NODE_MODULES["tile_sensor"], 0)
+
+
+def linear_system() -> None:
+    run_main(NODE_MODULES["linear_system"], 0)
+
+
+def motion_commander() -> None:
+    run_main(NODE_MODULES["motion_commander"], 0)
+
+
+def grid_localizer() -> None:
+    run_main(NODE_MODULES["grid_localizer"], 0)
+
+
+def planar_robot() -> None:
+    run_main(NODE_MODULES["planar_robot"], 0)
+
+
+def ekf_localizer() -> None:
+    run_main(NODE_MODULES["ekf_localizer"], 0)
+
+
+def landmark_robot() -> None:
+    run_main(NODE_MODULES["landmark_robot"], 0)
+
+
+def _run_named() -> None:
+    """``python -m estimation_nodes.nodes.start NODE [ARGS]``: NODE's main() with ARGS."""
+    if len(sys.argv) < 2 or sys.argv[1] not in NODE_MODULES:
+        print(f"usage: python -m {__spec__.name if __spec__ else 'start'} NODE [ARGS]; NODE "
+              f"one of {', '.join(NODE_MODULES)}", file=sys.stderr)
+        sys.exit(2)
+    name = sys.argv.pop(1)
+    sys.argv[0] = name
+    run_main(NODE_MODULES[name], 0)
+
+
+if __name__ == "__main__":
+    _run_named()
