@@ -82,3 +82,11 @@ GRID_TOPIC_TYPES = {
     BELIEF_MAP: "nav_msgs/msg/OccupancyGrid",
     LOCALIZATION_QUALITY: "std_msgs/msg/Float64",
 }
+
+#: The landmark localization run's topics (ekf_localizer, landmark_robot).
+LANDMARK_TOPIC_TYPES = {
+    ODOM: "nav_msgs/msg/Odometry",
+    LANDMARK_OBSERVATIONS: "sensor_msgs/msg/PointCloud2",
+    TRUE_POSE: "geometry_msgs/msg/PoseStamped",
+    POSE: "geometry_msgs/msg/PoseWithCovarianceStamped",
+}

@@ -17,10 +17,10 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-import yaml
 
 from estimation_nodes.params import topics
 from estimation_nodes.params.param_files import check_params_file
+from estimation_nodes.params.scenarios import scenario_kind
 from estimation_nodes.tools.demo.graph_runtime import (
     INTERRUPTED,
     HeldInterrupts,
@@ -64,16 +64,21 @@ def find_scenario(name: str) -> Path:
                     f"{known_scenarios()}")
 
 
+#: The simulated world each kind of tile or Kalman run drives.
+SIMULATORS = {"tiles": "tile_sensor", "linear_system": "linear_system"}
+
+
+def kind_of(params: Path) -> str:
+    """The kind of run the parameter file says it is (params/scenarios.py)."""
+    try:
+        return scenario_kind(params.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as error:
+        raise DemoError(f"{params}: {error}") from None
+
+
 def simulator_for(params: Path) -> str:
-    """The simulated world a parameter file is for: planar_robot or linear_system when the
-    file has a section for it (grid localization on a map, a matrix Kalman scenario),
-    otherwise the tile world's tile_sensor."""
-    document = yaml.safe_load(params.read_text(encoding="utf-8")) or {}
-    names = {str(key).rstrip("/").rsplit("/", 1)[-1] for key in document}
-    for simulator in ("planar_robot", "linear_system"):
-        if simulator in names:
-            return simulator
-    return "tile_sensor"
+    """The simulator of a tile or linear-system run."""
+    return SIMULATORS[kind_of(params)]
 
 
 def known_scenarios() -> list[str]:
@@ -164,8 +169,13 @@ def run_demo(argv: Sequence[str] | None) -> int:
     env = ros_environment()
     os.environ.update(env)
     print(f"estimation_demo: parameters from {params}")
-    if simulator_for(params) == "planar_robot":
-        return run_grid_scenario(params, args)
+    try:
+        kind = kind_of(params)
+    except DemoError as error:
+        print(f"estimation_demo: {error}", file=sys.stderr)
+        return 2
+    if kind in ("grid", "landmarks"):
+        return run_grid_scenario(params, args, kind)
     runner = run_in_process if args.in_process else run_processes
     try:
         code, record = runner(params, args)
@@ -201,18 +211,23 @@ def resolved(topic_types: dict[str, str]) -> dict[str, str]:
             for topic, name in topic_types.items()}
 
 
-def run_grid_scenario(params: Path, args: argparse.Namespace) -> int:
-    """A grid localization run (tools/grid_demo.py); its exit code."""
+def run_grid_scenario(params: Path, args: argparse.Namespace, kind: str) -> int:
+    """A grid or landmark localization run (tools/demo/grid_run.py); its exit code."""
     from estimation_nodes.tools.demo import grid_run as grid_demo
 
     if args.in_process:
-        print("estimation_demo: --in-process is not available for grid localization runs",
+        print(f"estimation_demo: --in-process is not available for {kind} runs",
+              file=sys.stderr)
+        return 2
+    if kind == "landmarks" and args.plot:
+        print("estimation_demo: --plot is not available for landmarks runs yet",
               file=sys.stderr)
         return 2
     if args.plot and not args.record:
         # The picture is drawn from a recording of the run.
         args.record = args.plot.with_suffix(".mcap")
-    grid_topics = resolved(topics.GRID_TOPIC_TYPES)
+    grid_topics = resolved(topics.GRID_TOPIC_TYPES if kind == "grid"
+                           else topics.LANDMARK_TOPIC_TYPES)
     try:
         sinks = make_sinks(params, args, grid_topics,
                            {**grid_topics, topics.DIAGNOSTICS: topics.LIVE_TOPIC_TYPES[
@@ -221,7 +236,7 @@ def run_grid_scenario(params: Path, args: argparse.Namespace) -> int:
         print(f"estimation_demo: {error}", file=sys.stderr)
         return 2
     try:
-        code, record = grid_demo.run(params, args, sinks)
+        code, record = grid_demo.run(params, args, sinks, kind)
     finally:
         close_sinks(sinks)
     print(record.summary())
@@ -252,8 +267,9 @@ def make_sinks(params: Path, args: argparse.Namespace, recorded: dict[str, str] 
         if args.record:
             from estimation_nodes.tools.recording.mcap import McapRunWriter
 
-            metadata = {"parameters_yaml": params.read_text(encoding="utf-8"),
-                        "parameters_file": str(params)}
+            text = params.read_text(encoding="utf-8")
+            metadata = {"parameters_yaml": text, "parameters_file": str(params),
+                        "kind": scenario_kind(text)}
             sinks.append(McapRunWriter(args.record, recorded or resolved(topics.TOPIC_TYPES),
                                        metadata))
     except Exception:

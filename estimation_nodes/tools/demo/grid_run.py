@@ -1,7 +1,9 @@
-"""The demo's grid localization run: planar_robot and grid_localizer, watched and summarized.
+"""The demo's localization runs on a map or among landmarks: a localizer and a simulated
+robot (grid_localizer and planar_robot, or ekf_localizer and landmark_robot), watched and
+summarized.
 
-Started by estimation_demo for a scenario with a ``planar_robot`` section
-(msgs_config/grid_localization.yaml). The localizer starts first; the
+Started by estimation_demo for a scenario of kind ``grid`` or ``landmarks``
+(msgs_config/grid_localization.yaml, landmarks.yaml). The localizer starts first; the
 simulated robot, once the localizer has published its first estimate (its map
 and kernels are loaded: several seconds on a first run), and it ends itself
 after its ``duration``; a monitor here
@@ -43,27 +45,30 @@ class GridRecord:
         near = [e <= NEAR_M and a <= NEAR_DEG for _, e, a, _, _ in self.updates]
         first = next((t for (t, *_), ok in zip(self.updates, near) if ok), None)
         _, error, angle, quality, _ = self.updates[-1]
-        lines += [f"  within {NEAR_M} m and {NEAR_DEG:g} deg of the truth in {sum(near)} of "
-                  f"{len(near)} updates" + (f", first at {first:.1f} s" if first else ""),
-                  f"  quality at the first update {self.updates[0][3]:.3f}, at the last "
-                  f"{quality:.3f}",
-                  f"  final error {error:.3f} m, {angle:.1f} deg"]
+        lines.append(f"  within {NEAR_M} m and {NEAR_DEG:g} deg of the truth in {sum(near)} "
+                     f"of {len(near)} updates" + (f", first at {first:.1f} s" if first else ""))
+        if not math.isnan(quality):     # a landmark localizer publishes no quality
+            lines.append(f"  quality at the first update {self.updates[0][3]:.3f}, at the "
+                         f"last {quality:.3f}")
+        lines.append(f"  final error {error:.3f} m, {angle:.1f} deg")
         return "\n".join(lines)
 
 
-def grid_topic_types() -> dict[str, str]:
-    return {f"/{t}" if not t.startswith("/") else t: n for t, n in topics.GRID_TOPIC_TYPES.items()}
+def topic_types(kind: str) -> dict[str, str]:
+    """The run's topics as the nodes resolve them in the root namespace."""
+    types = topics.GRID_TOPIC_TYPES if kind == "grid" else topics.LANDMARK_TOPIC_TYPES
+    return {f"/{t}" if not t.startswith("/") else t: n for t, n in types.items()}
 
 
 class GridMonitor(Node):
     """Subscribes to the run's grid topics; prints and keeps each update; feeds raw sinks."""
 
-    def __init__(self, quiet: bool, sinks: list) -> None:
+    def __init__(self, quiet: bool, sinks: list, kind: str = "grid") -> None:
         super().__init__("estimation_demo_grid_monitor")
         self.record = GridRecord()
         #: Whether the localizer has published an estimate: it is ready for the robot.
         self.localizer_ready = False
-        self._quiet, self._sinks = quiet, sinks
+        self._quiet, self._sinks, self._kind = quiet, sinks, kind
         self._truth: dict[tuple[int, int], tuple[float, float, float]] = {}
         self._quality = float("nan")
         self._entropy = float("nan")
@@ -81,8 +86,9 @@ class GridMonitor(Node):
     def _raw_subscriptions(self) -> None:
         from estimation_nodes.tools.demo.monitor import message_class, observer_qos
 
-        for topic, type_name in grid_topic_types().items():
-            qos = 10 if topic in ("/scan", "/odom") else observer_qos(topic)
+        for topic, type_name in topic_types(self._kind).items():
+            qos = 10 if topic in ("/scan", "/odom", "/landmark_observations") \
+                else observer_qos(topic)
             self.create_subscription(message_class(type_name), topic, self._forward(topic),
                                      qos, raw=True)
 
@@ -119,12 +125,22 @@ class GridMonitor(Node):
                   f"{self._entropy:.1f} bits", flush=True)
 
 
-def run(params: Path, args, sinks: list) -> tuple[int, GridRecord]:
-    """Start the localizer, then the robot once the localizer is ready; watch until the
-    robot's duration is over."""
-    code, monitor = run_graph(params, lambda: GridMonitor(args.quiet, sinks), [
-        NodeStart("grid_localizer"),
-        NodeStart("planar_robot", ("-p", "exit_when_done:=true"),
-                  ready=lambda monitor: monitor.localizer_ready),
-    ], "planar_robot", args.timeout, args.linger)
+#: Each kind's localizer and simulated robot.
+NODES = {"grid": ("grid_localizer", "planar_robot"),
+         "landmarks": ("ekf_localizer", "landmark_robot")}
+
+
+def run(params: Path, args, sinks: list, kind: str = "grid") -> tuple[int, GridRecord]:
+    """Start the localizer, then the robot once the localizer is ready (a grid localizer
+    has published its first estimate; a landmark localizer listens to odometry); watch
+    until the robot's duration is over."""
+    localizer, robot = NODES[kind]
+
+    def ready(monitor: GridMonitor) -> bool:
+        return monitor.localizer_ready if kind == "grid" \
+            else monitor.count_publishers(topics.POSE) > 0
+    code, monitor = run_graph(params, lambda: GridMonitor(args.quiet, sinks, kind), [
+        NodeStart(localizer),
+        NodeStart(robot, ("-p", "exit_when_done:=true"), ready=ready),
+    ], robot, args.timeout, args.linger)
     return code, monitor.record if monitor is not None else GridRecord()

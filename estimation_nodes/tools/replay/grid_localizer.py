@@ -26,6 +26,7 @@ from estimation_nodes.params import topics
 from estimation_nodes.params.grid import build_grid_localizer_settings
 from estimation_nodes.params.map_files import occupancy_from_message
 from estimation_nodes.params.param_files import read_node_parameters
+from estimation_nodes.params.scenarios import DEFAULT_KIND, scenario_kind
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults
 from estimation_nodes.tools.recording.mcap import RecordingError
 
@@ -41,13 +42,24 @@ class GridComparison:
         return not self.differences and self.compared > 0
 
 
-def is_grid_recording(path: Path) -> bool:
+def recorded_kind(path: Path) -> str:
+    """The kind of run a recording is, as its scenario said (params/scenarios.py): the
+    demo keeps it, and the parameter file, in the recording's metadata."""
     from mcap.reader import make_reader
 
+    from estimation_nodes.tools.recording.mcap import METADATA_NAME
+
     with path.open("rb") as stream:
-        summary = make_reader(stream).get_summary()
-    return summary is not None and any(c.topic == f"/{topics.SCAN}"
-                                       for c in summary.channels.values())
+        for entry in make_reader(stream).iter_metadata():
+            if entry.name == METADATA_NAME:
+                metadata = dict(entry.metadata)
+                return metadata.get("kind") or scenario_kind(
+                    metadata.get("parameters_yaml", ""))
+    return DEFAULT_KIND
+
+
+def is_grid_recording(path: Path) -> bool:
+    return recorded_kind(path) == "grid"
 
 
 def recorded_messages(path: Path) -> tuple[list[tuple[str, object]], dict[str, str]]:
