@@ -103,6 +103,8 @@ class PlanarRobotSettings:
     duration: float
     exit_when_done: bool
     kidnap_after: float
+    hold_until_matched: bool
+    hold_for_nodes: tuple[str, ...]
 
 
 def build_planar_robot_settings(values: Mapping[str, Any]) -> PlanarRobotSettings:
@@ -122,7 +124,8 @@ def build_planar_robot_settings(values: Mapping[str, Any]) -> PlanarRobotSetting
         beams=values["beams"], scan_noise_std=values["scan_noise_std"],
         scan_random_fraction=values["scan_random_fraction"], initial_pose=initial_pose,
         duration=values["duration"], exit_when_done=values["exit_when_done"],
-        kidnap_after=values["kidnap_after"])
+        kidnap_after=values["kidnap_after"], hold_until_matched=values["hold_until_matched"],
+        hold_for_nodes=tuple(name for name in values["hold_for_nodes"] if name))
 
 
 def default_sensor_field() -> SensorField:

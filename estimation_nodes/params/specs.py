@@ -312,6 +312,15 @@ PLANAR_ROBOT_SPECS = GRID_MODEL_SPECS + (
     ParamSpec("kidnap_after", 0.0, "Teleport the robot to another free place after this many "
               "seconds (0: never), to see the localizer lose and find it again.",
               read_only=True, min_value=0.0, max_value=1e6),
+    ParamSpec("hold_until_matched", True,
+              "Start moving (the first odom and scan) only once the nodes of hold_for_nodes "
+              "(any subscriber, if it is empty) are matched on odom and scan: a localizer or "
+              "a recorder started with the robot misses none of its run.", read_only=True),
+    replace(HOLD_FOR_NODES, default=["grid_localizer"], description=(
+        "Nodes (names relative to this node's namespace, or absolute) whose subscriptions "
+        "to odom and scan must be matched before the robot starts, with hold_until_matched; "
+        "add a recorder's node to have it record the whole run (a count of subscribers "
+        "would let `ros2 topic echo` stand in for the localizer).")),
 )
 
 #: Each node's parameters, by node name.
