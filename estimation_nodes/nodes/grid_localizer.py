@@ -80,7 +80,7 @@ class GridLocalizer(Node):
         self._warnings = ThrottledWarnings(self.get_logger())
         self.localization: GridLocalization | None = None
         self.last_update_s = float("nan")
-        latched = latched_qos(1)
+        latched = latched_qos(self._settings.history_depth)
         self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, topics.POSE, latched)
         self._belief_pub = self.create_publisher(OccupancyGrid, topics.BELIEF_MAP, latched)
         self._quality_pub = self.create_publisher(Float64, topics.LOCALIZATION_QUALITY, latched)
@@ -89,7 +89,7 @@ class GridLocalizer(Node):
         if self._settings.model is not None:
             self._start(self._settings.model)
         else:
-            self.create_subscription(OccupancyGrid, topics.MAP, self._on_map, latched)
+            self.create_subscription(OccupancyGrid, topics.MAP, self._on_map, latched_qos(1))
         # Best effort takes both best-effort and reliable publishers; a scan is only worth
         # its latest, while odometry is followed in order.
         self.create_subscription(LaserScan, topics.SCAN, self._on_scan, qos_profile_sensor_data)

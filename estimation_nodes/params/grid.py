@@ -52,6 +52,7 @@ class GridLocalizerSettings:
     #: quality_angle, in radians.
     quality_angle: float
     frame_id: str
+    history_depth: int
     diagnostics_period: float
 
     def model_for(self, occupancy: OccupancyMap) -> GridModel:
@@ -80,7 +81,7 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
         kidnap_probability=values["kidnap_probability"], max_beams=values["max_beams"],
         quality_radius=values["quality_radius"],
         quality_angle=math.radians(values["quality_angle"]), frame_id=values["frame_id"],
-        diagnostics_period=values["diagnostics_period"])
+        history_depth=values["history_depth"], diagnostics_period=values["diagnostics_period"])
 
 
 @dataclass(frozen=True)

@@ -279,6 +279,12 @@ GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
     ParamSpec("quality_angle", 10.0, "... and this heading difference (degrees).",
               read_only=True, min_value=0.0, max_value=180.0),
     ParamSpec("frame_id", "map", "Frame of the published pose and belief map."),
+    ParamSpec("history_depth", 1,
+              "How many of the latest outputs pose, belief_map and localization_quality each "
+              "keep for late subscribers (transient_local): 1 hands a late `ros2 topic echo` "
+              "the latest, as /amcl_pose does; more replays that many, oldest first, so a "
+              "recorder that hears the localizer late still records its first updates.",
+              read_only=True, min_value=1, max_value=100000),
     ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics messages.",
               read_only=True, min_value=0.01, max_value=3600.0),
 )

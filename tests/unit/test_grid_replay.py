@@ -58,6 +58,10 @@ def initial_pose(pose, stamp_ns):
     return pose_with_covariance(msg, pose, cov[np.ix_((0, 1, 5), (0, 1, 5))])
 
 
+def stamp_of(step: int) -> int:
+    return T0 + step * SECOND // 10
+
+
 class Run:
     """A recording made by hand: the inputs, and what a localizer that took only some
     scans published, each message with its publish time."""
@@ -94,7 +98,7 @@ def a_run_that_leaves_scans_out(left_out=(3, 4, 9), reset_at=6, prior_at=11):
     run.publish_estimate(T0 - SECOND)                   # the start: stamped "now"
     taken = []
     for step in range(16):
-        stamp = T0 + step * SECOND // 10
+        stamp = stamp_of(step)
         pose = (3.0 + 0.15 * step, 2.0, 0.02 * step)
         run.record("/odom", odom(pose, stamp))
         run.localization.on_odometry(pose, stamp)
@@ -182,3 +186,31 @@ def test_any_choice_of_scans_replays_equal(left_out):
     comparison = replay_records(run.records, run.values, 1e-9)
     assert comparison.equal, comparison.differences
     assert comparison.compared == len(taken)
+
+
+def without_outputs_before(records: list[Recorded], stamp_ns: int) -> list[Recorded]:
+    """The recording of a recorder that heard the localizer when it published the update
+    at ``stamp_ns``: no output before it (latched, depth 1: the latest only)."""
+    first = next(i for i, r in enumerate(records)
+                 if r.topic == "/pose" and r.msg.header.stamp.sec * SECOND
+                 + r.msg.header.stamp.nanosec == stamp_ns)
+    outputs = ("/pose", "/localization_quality")
+    return [r for i, r in enumerate(records) if r.topic not in outputs or i >= first - 1]
+
+
+def test_a_recorder_that_heard_the_localizer_late_replays_from_the_rule():
+    run, taken = a_run_that_leaves_scans_out(left_out=(9,))
+    assert taken[:3] == [stamp_of(0), stamp_of(2), stamp_of(4)]     # before the reset
+    records = without_outputs_before(run.records, taken[2])
+    comparison = replay_records(records, run.values, 1e-9)
+    assert comparison.equal, comparison.differences
+    assert comparison.assumed == 2 and comparison.compared == len(taken) - 2
+
+
+def test_a_scan_left_out_before_the_recorder_heard_the_localizer_is_found_out():
+    run, taken = a_run_that_leaves_scans_out(left_out=(2,))
+    assert taken[:3] == [stamp_of(0), stamp_of(3), stamp_of(5)]     # before the reset
+    records = without_outputs_before(run.records, taken[2])
+    comparison = replay_records(records, run.values, 1e-9)
+    assert len(comparison.differences) == 1
+    assert "the first output recorded" in comparison.differences[0]

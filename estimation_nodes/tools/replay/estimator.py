@@ -265,6 +265,10 @@ def _main_grid(args: argparse.Namespace) -> int:
     others = ", ".join(plural(n, kind) for kind, n in sorted(comparison.others.items()) if n)
     if others:
         print(f"  also compared: {others} (uniform belief or initial pose)")
+    if comparison.assumed:
+        print(f"  the recording starts after the localizer's first outputs: it was taken to "
+              f"have made {plural(comparison.assumed, 'update')} before them by its rule, "
+              f"with the recorded scans")
     if comparison.left_out:
         print(f"  {plural(comparison.left_out, 'scan')} its update rule takes the localizer "
               f"left out (superseded, late odometry, or no time); the replay took the scans "

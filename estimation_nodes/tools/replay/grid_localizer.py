@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -48,6 +49,7 @@ from estimation_nodes.params import topics
 from estimation_nodes.params.grid import GridLocalizerSettings, build_grid_localizer_settings
 from estimation_nodes.params.param_files import read_node_parameters
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults
+from estimation_nodes.params.wording import plural
 from estimation_nodes.tools.recording.mcap import RecordingError
 
 MAP, SCAN, ODOM = f"/{topics.MAP}", f"/{topics.SCAN}", f"/{topics.ODOM}"
@@ -96,6 +98,8 @@ class GridComparison:
     others: dict[str, int] = field(default_factory=lambda: defaultdict(int))
     #: Scans the update rule would have taken that the localizer left out.
     left_out: int = 0
+    #: Updates taken to have been made before the first recorded output (0: none).
+    assumed: int = 0
 
     @property
     def equal(self) -> bool:
@@ -197,42 +201,55 @@ def replay_records(records: list[Recorded], values: dict, tolerance: float) -> G
     inputs = _InputsInStampOrder(records)
     comparison = GridComparison()
     localization: GridLocalization | None = None
+
+    def update(scan, stamp_ns: int) -> None:
+        ranges, angles, _ = scan_beams(scan, settings.sensor.max_range, settings.max_beams)
+        assert localization is not None
+        localization.update(ranges, angles, stamp_ns)
+
     for step in steps:
-        if step.kind == "start" or localization is None:
-            # Without its start recorded (a recorder that joined late gets the latched
-            # output only), the localizer is taken to have started just before.
+        assumed = None
+        alone = GridComparison()                 # this step's differences
+        if step.kind == "start":
             localization = settings.localization(_model(settings, step.maps, records))
-        if step.kind == "reset":
-            localization.global_localization()
-        elif step.kind == "prior":
-            localization.set_prior(planar_pose(step.prior.pose.pose),
-                                   covariance_3x3(step.prior.pose.covariance))
-        elif step.kind == "update":
-            comparison.left_out += inputs.advance_to(step.stamp_ns, localization)
-            if not localization.due(step.stamp_ns):
-                comparison.differences.append(
-                    f"{_at(step)}: the localizer updated with this scan, which its update "
-                    f"rule does not take (is odometry of its time missing?)")
-            ranges, angles, _ = scan_beams(step.scan, settings.sensor.max_range,
-                                           settings.max_beams)
-            try:
-                localization.update(ranges, angles, step.stamp_ns)
-            except (ValueError, errors.ZeroEvidenceError) as error:
-                comparison.differences.append(f"{_at(step)}: offline, the update failed: "
-                                              f"{error}")
-                break
+        elif localization is None:
+            # The recorder heard the localizer after it started: of what it published
+            # before, it got the latest output only (latched). Take it to have started
+            # before the first recorded scan and to have taken every scan its rule takes
+            # until this output, which then says whether it did.
+            localization = settings.localization(_model(settings, (), records))
+            assumed = inputs.advance_to(step.stamp_ns, localization, take=update)
+        try:
+            if step.kind == "reset":
+                localization.global_localization()
+            elif step.kind == "prior":
+                localization.set_prior(planar_pose(step.prior.pose.pose),
+                                       covariance_3x3(step.prior.pose.covariance))
+            elif step.kind == "update":
+                if assumed is None:
+                    comparison.left_out += inputs.advance_to(step.stamp_ns, localization)
+                if not localization.due(step.stamp_ns):
+                    alone.differences.append(
+                        f"{_at(step)}: the localizer updated with this scan, which its "
+                        f"update rule does not take (is odometry of its time missing?)")
+                update(step.scan, step.stamp_ns)
+        except (ValueError, errors.ZeroEvidenceError) as error:
+            comparison.differences.append(f"{_at(step)}: offline, this failed: {error}")
+            break
         offline = localization.estimate(settings.quality_radius, settings.quality_angle)
         if step.kind == "update":
             comparison.compared += 1
-            _compare(comparison, step, offline, tolerance)
-            continue
-        comparison.others[step.kind] += 1
-        if step.kind != "reset":
-            _compare(comparison, step, offline, tolerance)
-            continue
-        alone = GridComparison()
+        else:
+            comparison.others[step.kind] += 1
         _compare(alone, step, offline, tolerance)
-        if alone.differences:
+        if alone.differences and assumed is not None:
+            comparison.differences.append(
+                f"{_at(step)}: the first output recorded; what the localizer published "
+                f"before it was not (a recorder that heard it late), and the update rule "
+                f"over the {plural(assumed, 'recorded scan')} it takes before this does not "
+                f"make it: the localizer left some out, so nothing after can be compared")
+            break
+        if alone.differences and step.kind == "reset":
             comparison.others[step.kind] -= 1
             comparison.differences.append(
                 f"pose at {step.stamp_ns / 1e9:.3f} s: not of a recorded scan or initial "
@@ -240,8 +257,11 @@ def replay_records(records: list[Recorded], values: dict, tolerance: float) -> G
                 f"recording (a recorder that heard the sensor after the localizer did?); "
                 f"every later update depends on it, so the comparison stops here")
             break
+        comparison.differences += alone.differences
         for name, error in alone.worst.items():
             comparison.worst[name] = max(comparison.worst.get(name, 0.0), error)
+        if assumed:
+            comparison.assumed = assumed
     return comparison
 
 
@@ -256,10 +276,12 @@ class _InputsInStampOrder:
         self._events = events
         self._next = 0
 
-    def advance_to(self, stamp_ns: int, localization: GridLocalization) -> int:
-        """Apply the odometry up to ``stamp_ns`` (a scan's), as the localizer follows it;
-        how many scans before it the update rule would have taken (left out online)."""
-        left_out = 0
+    def advance_to(self, stamp_ns: int, localization: GridLocalization,
+                   take: Callable[[Any, int], None] | None = None) -> int:
+        """Apply the odometry up to ``stamp_ns`` (a scan's, or a reset's time), as the
+        localizer follows it; the scans before it that the update rule takes: how many
+        (left out online, as the localizer took the next one), or with ``take`` taken."""
+        due = 0
         events = self._events
         while self._next < len(events) and events[self._next][:2] <= (stamp_ns, 0):
             stamp, rank, msg = events[self._next]
@@ -268,13 +290,15 @@ class _InputsInStampOrder:
                 pose = planar_pose(msg.pose.pose)
                 if finite_pose(pose):             # the localizer drops the others
                     localization.on_odometry(pose, stamp or None)
-            elif stamp < stamp_ns and localization.updates and localization.due(stamp):
-                # Before the first update the localizer may not have been there yet.
-                left_out += 1
-        # The scan itself comes next: step over it.
+            # Before the first update the localizer may not have been there yet.
+            elif (take is not None or localization.updates) and localization.due(stamp):
+                due += 1
+                if take is not None:
+                    take(msg, stamp)
+        # The scan of this update comes next: step over it.
         while self._next < len(events) and events[self._next][:2] == (stamp_ns, 1):
             self._next += 1
-        return left_out
+        return due
 
 
 def _model(settings: GridLocalizerSettings, maps: tuple, records: list[Recorded]):
