@@ -3,12 +3,19 @@
 The belief over (x, y, heading) starts uniform over the free cells: the
 robot need not be told where it is. ``odom`` is followed continuously; a
 ``scan`` updates the belief once the robot moved ``update_min_d`` or turned
-``update_min_a`` since the last update (core/grid_state.py). After each
+``update_min_a`` since the last update (core/grid/localization.py). After each
 update: ``pose`` (the most likely state, with the belief's covariance around
 it), ``belief_map`` (the belief's maximum over headings, 0..100, on the
 state grid: RViz's Map display and Foxglove's 3D panel draw it) and
-``localization_quality`` (the belief's probability near that pose). Bad
-messages are dropped and counted, never a NaN belief.
+``localization_quality`` (the belief's probability near that pose), the
+quality first. Bad messages are dropped and counted, never a NaN belief.
+
+A scan waits up to SCAN_WAIT_S for the odometry of its time and is dropped
+if it does not come; a scan that comes while another waits supersedes it.
+Each published pose carries the stamp of what made it: its scan's time, the
+initial pose's, or the time of a start or reset (uniform belief). So a
+replay of a recorded run (tools/replay/grid_localizer.py) takes exactly the
+scans this node took, whichever it left out.
 """
 
 from __future__ import annotations
@@ -31,11 +38,12 @@ from std_srvs.srv import Trigger
 
 from estimation_nodes.core import errors
 from estimation_nodes.core.grid import steps as grid
-from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.core.grid.localization import ODOMETRY_HISTORY, GridLocalization
 from estimation_nodes.nodes.grid_messages import (
     covariance_3x3,
     finite_pose,
     occupancy_grid,
+    occupancy_of,
     planar_pose,
     pose_with_covariance,
     scan_beams,
@@ -46,12 +54,16 @@ from estimation_nodes.nodes.qos import latched_qos
 from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
 from estimation_nodes.params.grid import build_grid_localizer_settings
-from estimation_nodes.params.map_files import occupancy_from_message
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS
 
 #: How long a scan waits for the odometry of its time (as tf's message filter waits for a
-#: transform); after that it is used with the latest odometry before it.
+#: transform); after that it is dropped, as that filter drops it: used with an older
+#: odometry pose, its update would depend on when messages arrived, and no replay of the
+#: recorded run could make it again.
 SCAN_WAIT_S = 0.2
+#: Odometry messages queued for the localizer: 20 s at 10 Hz, 4 s at 50 Hz, so an update
+#: that keeps it busy loses none (a lost one would move the next update's prediction).
+ODOM_DEPTH = ODOMETRY_HISTORY
 
 
 class GridLocalizer(Node):
@@ -68,7 +80,7 @@ class GridLocalizer(Node):
         self._warnings = ThrottledWarnings(self.get_logger())
         self.localization: GridLocalization | None = None
         self.last_update_s = float("nan")
-        latched = latched_qos(1)
+        latched = latched_qos(self._settings.history_depth)
         self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, topics.POSE, latched)
         self._belief_pub = self.create_publisher(OccupancyGrid, topics.BELIEF_MAP, latched)
         self._quality_pub = self.create_publisher(Float64, topics.LOCALIZATION_QUALITY, latched)
@@ -77,11 +89,11 @@ class GridLocalizer(Node):
         if self._settings.model is not None:
             self._start(self._settings.model)
         else:
-            self.create_subscription(OccupancyGrid, topics.MAP, self._on_map, latched)
+            self.create_subscription(OccupancyGrid, topics.MAP, self._on_map, latched_qos(1))
         # Best effort takes both best-effort and reliable publishers; a scan is only worth
         # its latest, while odometry is followed in order.
         self.create_subscription(LaserScan, topics.SCAN, self._on_scan, qos_profile_sensor_data)
-        self.create_subscription(Odometry, topics.ODOM, self._on_odom, 50)
+        self.create_subscription(Odometry, topics.ODOM, self._on_odom, ODOM_DEPTH)
         self.create_subscription(PoseWithCovarianceStamped, topics.INITIAL_POSE,
                                  self._on_initial_pose, 10)
         self.create_service(Trigger, "~/global_localization", self._on_global_localization)
@@ -103,13 +115,8 @@ class GridLocalizer(Node):
     # --- inputs -----------------------------------------------------------------------------
 
     def _on_map(self, msg: OccupancyGrid) -> None:
-        info = msg.info
-        origin = (info.origin.position.x, info.origin.position.y,
-                  planar_pose(info.origin)[2])
         try:
-            occupancy = occupancy_from_message(info.width, info.height, info.resolution,
-                                               origin, msg.data)
-            model = self._settings.model_for(occupancy)
+            model = self._settings.model_for(occupancy_of(msg))
         except errors.MapError as error:
             self._reject("bad_map", f"map dropped: {error}")
             return
@@ -137,7 +144,8 @@ class GridLocalizer(Node):
         waiting = self._waiting_scan
         if waiting is not None and time.monotonic() > waiting[2]:
             self._waiting_scan = None
-            self._use_scan(waiting[0], waiting[1])
+            self._reject("scan_without_odometry", f"scan dropped: no odometry of its time "
+                         f"came within {SCAN_WAIT_S} s")
 
     def _on_scan(self, msg: LaserScan) -> None:
         if self.localization is None:
@@ -195,7 +203,10 @@ class GridLocalizer(Node):
         self.handled["initialpose"] += 1
         self.get_logger().info(f"initial pose ({pose[0]:.2f}, {pose[1]:.2f}, "
                                f"{math.degrees(pose[2]):.0f} deg) taken as the prior")
-        self._publish()
+        # Stamped with the initial pose's time: the belief as of that prior (and a replay
+        # of the run tells it from an update by that stamp).
+        stamped = _stamp_ns(msg.header.stamp) is not None
+        self._publish(Time.from_msg(msg.header.stamp) if stamped else None)
 
     def _on_global_localization(self, _request, response: Trigger.Response):
         if self.localization is None:

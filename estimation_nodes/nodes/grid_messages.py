@@ -9,6 +9,8 @@ from geometry_msgs.msg import Pose, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid
 
 from estimation_nodes.core.geometry import quaternion_from_rpy, yaw_from_quaternion
+from estimation_nodes.core.grid.occupancy import OccupancyMap
+from estimation_nodes.params.map_files import occupancy_from_message
 
 #: Indices of x, y and yaw in PoseWithCovariance's 6 x 6 covariance (row-major).
 POSE_XY_YAW = (0, 1, 5)
@@ -53,6 +55,14 @@ def occupancy_grid(cells: np.ndarray, resolution: float, origin: tuple[float, fl
     msg.info.origin.orientation.w = 1.0
     msg.data = np.ascontiguousarray(cells, dtype=np.int8).ravel().tobytes()
     return msg
+
+
+def occupancy_of(msg: OccupancyGrid) -> OccupancyMap:
+    """The map of an OccupancyGrid message, as the localizer takes it (a MapError names a
+    bad field: sizes that do not match, a rotated origin, ...)."""
+    info = msg.info
+    origin = (info.origin.position.x, info.origin.position.y, planar_pose(info.origin)[2])
+    return occupancy_from_message(info.width, info.height, info.resolution, origin, msg.data)
 
 
 def scan_beams(scan, laser_max_range: float,

@@ -7,7 +7,10 @@ coming (within 0.5 s). Each step it publishes ``odom`` (nav_msgs/Odometry,
 its pose integrated from noisy motion, the localizer's own noise model),
 ``scan`` (sensor_msgs/LaserScan ray-cast from the true pose, with the noise
 the likelihood field assumes; inf for no return, REP 117) and ``true_pose``
-(geometry_msgs/PoseStamped). ``kidnap_after`` teleports it once.
+(geometry_msgs/PoseStamped). ``kidnap_after`` teleports it once. With
+``hold_until_matched`` it starts only once the nodes of ``hold_for_nodes``
+(the localizer, and a recorder if one is named) hear its odom and scan, so
+they miss none of its run.
 """
 
 from __future__ import annotations
@@ -25,9 +28,11 @@ from sensor_msgs.msg import LaserScan
 from estimation_nodes.core import errors
 from estimation_nodes.core.sim import planar
 from estimation_nodes.nodes.grid_messages import fill_pose, occupancy_grid
+from estimation_nodes.nodes.held_publisher import HOLD_CHECK_PERIOD_S
 from estimation_nodes.nodes.parameters import ConfigurationError, declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.nodes.subscribers import missing_subscribers
 from estimation_nodes.params import topics
 from estimation_nodes.params.grid import PlanarRobotSettings, build_planar_robot_settings
 from estimation_nodes.params.specs import PLANAR_ROBOT_SPECS
@@ -71,11 +76,33 @@ class PlanarRobot(Node):
         self._scan_pub = self.create_publisher(LaserScan, topics.SCAN, 10)
         self._truth_pub = self.create_publisher(PoseStamped, topics.TRUE_POSE, latched_qos(1))
         self.create_subscription(Twist, topics.CMD_VEL, self._on_cmd_vel, 10)
-        self.create_timer(self._dt, self._step)
         self.get_logger().info(
             f"ready: map {occupancy.cells.shape[1]} x {occupancy.cells.shape[0]} cells, start "
             f"({self._pose[0]:.2f}, {self._pose[1]:.2f}, {math.degrees(self._pose[2]):.0f} "
             f"deg), seed {seed}")
+        if not settings.hold_until_matched or not self._missing():
+            self.create_timer(self._dt, self._step)
+            return
+        self.get_logger().info(f"waiting for {', '.join(settings.hold_for_nodes) or 'a node'}"
+                               f" to hear odom and scan before moving")
+        self._hold_timer = self.create_timer(HOLD_CHECK_PERIOD_S, self._start_when_heard)
+
+    def _missing(self) -> list[str]:
+        """Which nodes of hold_for_nodes do not hear odom or scan yet."""
+        missing: list[str] = []
+        for publisher in (self._odom_pub, self._scan_pub):
+            if publisher.get_subscription_count() == 0:
+                return list(self._settings.hold_for_nodes) or ["(any subscriber)"]
+            missing += [name for name in missing_subscribers(
+                self, publisher, self._settings.hold_for_nodes) if name not in missing]
+        return missing
+
+    def _start_when_heard(self) -> None:
+        if self._missing():
+            return
+        self.destroy_timer(self._hold_timer)
+        self.get_logger().info("odom and scan are heard: moving")
+        self.create_timer(self._dt, self._step)
 
     def _initial_pose(self, settings: PlanarRobotSettings) -> planar.Pose:
         pose = settings.initial_pose

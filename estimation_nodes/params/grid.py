@@ -52,6 +52,7 @@ class GridLocalizerSettings:
     #: quality_angle, in radians.
     quality_angle: float
     frame_id: str
+    history_depth: int
     diagnostics_period: float
 
     def model_for(self, occupancy: OccupancyMap) -> GridModel:
@@ -80,7 +81,7 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
         kidnap_probability=values["kidnap_probability"], max_beams=values["max_beams"],
         quality_radius=values["quality_radius"],
         quality_angle=math.radians(values["quality_angle"]), frame_id=values["frame_id"],
-        diagnostics_period=values["diagnostics_period"])
+        history_depth=values["history_depth"], diagnostics_period=values["diagnostics_period"])
 
 
 @dataclass(frozen=True)
@@ -103,6 +104,8 @@ class PlanarRobotSettings:
     duration: float
     exit_when_done: bool
     kidnap_after: float
+    hold_until_matched: bool
+    hold_for_nodes: tuple[str, ...]
 
 
 def build_planar_robot_settings(values: Mapping[str, Any]) -> PlanarRobotSettings:
@@ -122,7 +125,8 @@ def build_planar_robot_settings(values: Mapping[str, Any]) -> PlanarRobotSetting
         beams=values["beams"], scan_noise_std=values["scan_noise_std"],
         scan_random_fraction=values["scan_random_fraction"], initial_pose=initial_pose,
         duration=values["duration"], exit_when_done=values["exit_when_done"],
-        kidnap_after=values["kidnap_after"])
+        kidnap_after=values["kidnap_after"], hold_until_matched=values["hold_until_matched"],
+        hold_for_nodes=tuple(name for name in values["hold_for_nodes"] if name))
 
 
 def default_sensor_field() -> SensorField:

@@ -280,6 +280,12 @@ GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
     ParamSpec("quality_angle", 10.0, "... and this heading difference (degrees).",
               read_only=True, min_value=0.0, max_value=180.0),
     ParamSpec("frame_id", "map", "Frame of the published pose and belief map."),
+    ParamSpec("history_depth", 1,
+              "How many of the latest outputs pose, belief_map and localization_quality each "
+              "keep for late subscribers (transient_local): 1 hands a late `ros2 topic echo` "
+              "the latest, as /amcl_pose does; more replays that many, oldest first, so a "
+              "recorder that hears the localizer late still records its first updates.",
+              read_only=True, min_value=1, max_value=100000),
     ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics messages.",
               read_only=True, min_value=0.01, max_value=3600.0),
 )
@@ -313,6 +319,15 @@ PLANAR_ROBOT_SPECS = GRID_MODEL_SPECS + (
     ParamSpec("kidnap_after", 0.0, "Teleport the robot to another free place after this many "
               "seconds (0: never), to see the localizer lose and find it again.",
               read_only=True, min_value=0.0, max_value=1e6),
+    ParamSpec("hold_until_matched", True,
+              "Start moving (the first odom and scan) only once the nodes of hold_for_nodes "
+              "(any subscriber, if it is empty) are matched on odom and scan: a localizer or "
+              "a recorder started with the robot misses none of its run.", read_only=True),
+    replace(HOLD_FOR_NODES, default=["grid_localizer"], description=(
+        "Nodes (names relative to this node's namespace, or absolute) whose subscriptions "
+        "to odom and scan must be matched before the robot starts, with hold_until_matched; "
+        "add a recorder's node to have it record the whole run (a count of subscribers "
+        "would let `ros2 topic echo` stand in for the localizer).")),
 )
 
 #: The landmark filter (ekf_localizer): the unicycle's odometry noise, the camera's

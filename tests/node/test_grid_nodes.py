@@ -167,6 +167,27 @@ def test_bad_localizer_parameters_are_one_clear_error(context, values, message):
         GridLocalizer(context=context, parameter_overrides=params(**values))
 
 
+def test_the_robot_starts_only_once_the_named_nodes_hear_it(nodes, executor, context,
+                                                          collector_factory):
+    """A recorder named in hold_for_nodes gets the robot's first odom and scan."""
+    nodes(PlanarRobot, map_file=CORRIDOR, seed=3, rate_hz=20.0,
+          hold_for_nodes=["grid_localizer", "recorder"])
+    early = collector_factory({"odom": (Odometry, 10), "scan": (LaserScan, 10)},
+                              name="grid_localizer")
+    assert spin_until(executor, lambda: not early.unmatched(), 10.0)
+    # The localizer alone hears it: the robot still waits for the recorder.
+    assert not spin_until(executor, lambda: early.count("odom") > 0, 1.0)
+    recorder = collector_factory({"odom": (Odometry, 10), "scan": (LaserScan, 10)},
+                                 name="recorder")
+    assert spin_until(executor, lambda: all(c.count("odom") and c.count("scan")
+                                            for c in (early, recorder)), 10.0)
+    # Both heard the run from its first step (odometry starts at the origin).
+    for heard in (early, recorder):
+        first = heard.messages["odom"][0].pose.pose.position
+        assert math.hypot(first.x, first.y) < 0.1
+    assert early.messages["odom"][0].header.stamp == recorder.messages["odom"][0].header.stamp
+
+
 def test_the_robot_needs_a_map_and_a_free_start(context):
     with pytest.raises(ConfigurationError, match="map_file"):
         PlanarRobot(context=context)

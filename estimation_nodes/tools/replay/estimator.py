@@ -268,7 +268,7 @@ def _is_grid(path: Path) -> bool:
 
 
 def _main_grid(args: argparse.Namespace) -> int:
-    """The grid localizer's replay (tools/grid_replay.py); its exit code."""
+    """The grid localizer's replay (tools/replay/grid_localizer.py); its exit code."""
     from estimation_nodes.tools.replay.grid_localizer import replay_grid
 
     try:
@@ -280,6 +280,17 @@ def _main_grid(args: argparse.Namespace) -> int:
         return 2
     print(f"pose: {comparison.compared} updates compared, largest differences "
           + ", ".join(f"{k} {v:.3g}" for k, v in comparison.worst.items()))
+    others = ", ".join(plural(n, kind) for kind, n in sorted(comparison.others.items()) if n)
+    if others:
+        print(f"  also compared: {others} (uniform belief or initial pose)")
+    if comparison.assumed:
+        print(f"  the recording starts after the localizer's first outputs: it was taken to "
+              f"have made {plural(comparison.assumed, 'update')} before them by its rule, "
+              f"with the recorded scans")
+    if comparison.left_out:
+        print(f"  {plural(comparison.left_out, 'scan')} its update rule takes the localizer "
+              f"left out (superseded, late odometry, or no time); the replay took the scans "
+              f"it took")
     for line in comparison.differences[:20]:
         print(line)
     verdict = "EQUAL" if comparison.equal else f"DIFFERENT ({len(comparison.differences)})"
