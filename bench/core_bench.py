@@ -24,7 +24,8 @@ from filterpy.kalman import KalmanFilter
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from timing import compare, format_seconds, table  # noqa: E402
 
-from estimation_nodes.core import histogram, kalman  # noqa: E402
+from estimation_nodes.core.kalman import linear as kalman  # noqa: E402
+from estimation_nodes.core.tiles import histogram  # noqa: E402
 from estimation_nodes.core.kalman.filter import KalmanFilter as RunningKalman  # noqa: E402
 from estimation_nodes.core.kalman.models import GaussianState, LinearGaussianModel  # noqa: E402
 from estimation_nodes.core.tiles.models import MotionKernel  # noqa: E402

@@ -1,0 +1,20 @@
+"""Every benchmark script starts: its imports follow the package's layout (a benchmark is
+run by hand, so a broken import would go unseen until then)."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+BENCH = Path(__file__).resolve().parents[2] / "bench"
+SCRIPTS = sorted(p for p in BENCH.glob("*.py") if p.name not in ("timing.py", "ros_env.py",
+                                                                "relay_node.py"))
+
+
+@pytest.mark.parametrize("script", SCRIPTS, ids=lambda p: p.name)
+def test_the_benchmark_starts(script):
+    result = subprocess.run([sys.executable, str(script), "--help"], capture_output=True,
+                            text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert "usage" in result.stdout
