@@ -17,7 +17,7 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
@@ -28,11 +28,13 @@ from std_srvs.srv import Trigger
 
 from estimation_nodes.core.causal_order import CausalOrder
 from estimation_nodes.core.kalman.landmarks import LandmarkLocalization
+from estimation_nodes.nodes.diagnostics import status_array
 from estimation_nodes.nodes.grid_messages import covariance_3x3, planar_pose, pose_with_covariance
 from estimation_nodes.nodes.landmark_messages import MalformedCloudError, landmark_points
 from estimation_nodes.nodes.parameters import declare_and_build, overlay, rejection
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
+from estimation_nodes.nodes.stamps import stamp_or_none
 from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
 from estimation_nodes.params.landmarks import build_ekf_localizer_settings
@@ -112,14 +114,14 @@ class EkfLocalizer(Node):
 
     def _on_odom(self, msg: Odometry) -> None:
         v, w = msg.twist.twist.linear.x, msg.twist.twist.angular.z
-        stamp = _stamp_ns(msg.header.stamp)
+        stamp = stamp_or_none(msg.header.stamp)
         if not (math.isfinite(v) and math.isfinite(w)) or stamp is None:
             self._reject("bad_odom", f"odom dropped: twist ({v}, {w}) or stamp {stamp} unusable")
             return
         self._submit(stamp, ODOM_RANK, ("odom", stamp / 1e9, v, w), "odom")
 
     def _on_landmarks(self, msg: PointCloud2) -> None:
-        stamp = _stamp_ns(msg.header.stamp)
+        stamp = stamp_or_none(msg.header.stamp)
         try:
             observations = landmark_points(msg)
         except MalformedCloudError as error:
@@ -229,22 +231,10 @@ class EkfLocalizer(Node):
         values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
         values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
         lost = localization is not None and localization.lost
-        warn = bool(self.rejected) or lost
-        status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if warn else DiagnosticStatus.OK,
-            name=f"{self.get_name()}: landmark localization",
-            message="lost: every observation gated" if lost
-            else "messages rejected" if self.rejected else "ok",
-            hardware_id=self.get_fully_qualified_name(),
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-        array = DiagnosticArray(status=[status])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self._diagnostics_pub.publish(array)
-
-
-def _stamp_ns(stamp) -> int | None:
-    value = stamp.sec * 1_000_000_000 + stamp.nanosec
-    return value or None
+        problems = ["lost: every observation gated"] if lost \
+            else ["messages rejected"] if self.rejected else []
+        self._diagnostics_pub.publish(status_array(self, "landmark localization", values,
+                                                   problems))
 
 
 main = main_for(EkfLocalizer)

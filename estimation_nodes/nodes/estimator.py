@@ -24,7 +24,7 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovariance, PoseWithCovarianceStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.event_handler import (
@@ -45,6 +45,7 @@ from estimation_nodes.core.kalman.filter import KalmanFilter
 from estimation_nodes.core.tiles import histogram
 from estimation_nodes.core.tiles.filter import HistogramFilter
 from estimation_nodes.nodes import wire
+from estimation_nodes.nodes.diagnostics import status_array
 from estimation_nodes.nodes.parameters import (
     declare_and_build,
     overlay,
@@ -478,16 +479,7 @@ class Estimator(Node):
         if self.held_reason is not None:
             values["parameters_held"] = self.held_reason
             problems.append("parameter change held")
-        status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if problems else DiagnosticStatus.OK,
-            name=f"{self.get_name()}: filters",
-            message="; ".join(problems) or "ok",
-            hardware_id=self.get_fully_qualified_name(),
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()],
-        )
-        array = DiagnosticArray(status=[status])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self._diagnostics_pub.publish(array)
+        self._diagnostics_pub.publish(status_array(self, "filters", values, problems))
 
 
 def main(args: list[str] | None = None) -> None:

@@ -26,7 +26,7 @@ from collections import Counter
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.node import Node
@@ -39,6 +39,7 @@ from std_srvs.srv import Trigger
 from estimation_nodes.core import errors
 from estimation_nodes.core.grid import steps as grid
 from estimation_nodes.core.grid.localization import ODOMETRY_HISTORY, GridLocalization
+from estimation_nodes.nodes.diagnostics import status_array
 from estimation_nodes.nodes.grid_messages import (
     covariance_3x3,
     finite_pose,
@@ -51,6 +52,7 @@ from estimation_nodes.nodes.grid_messages import (
 from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.nodes.stamps import stamp_or_none
 from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
 from estimation_nodes.params.grid import build_grid_localizer_settings
@@ -130,7 +132,7 @@ class GridLocalizer(Node):
             return
         if self.localization is None:
             return
-        if not self.localization.on_odometry(pose, _stamp_ns(msg.header.stamp)):
+        if not self.localization.on_odometry(pose, stamp_or_none(msg.header.stamp)):
             self._reject("odom_jump", f"odom jumped more than {self._settings.max_odom_jump} m:"
                          " not taken as motion; followed from the new pose")
             return
@@ -155,7 +157,7 @@ class GridLocalizer(Node):
             self._reject("bad_scan", f"scan dropped: angle_increment {msg.angle_increment}, "
                          f"angle_min {msg.angle_min}")
             return
-        stamp = _stamp_ns(msg.header.stamp)
+        stamp = stamp_or_none(msg.header.stamp)
         if stamp is not None and not self.localization.odometry_covers(stamp):
             # The odometry of the scan's time is still on its way (another topic): wait for
             # it, so the update does not depend on which came first.
@@ -205,7 +207,7 @@ class GridLocalizer(Node):
                                f"{math.degrees(pose[2]):.0f} deg) taken as the prior")
         # Stamped with the initial pose's time: the belief as of that prior (and a replay
         # of the run tells it from an update by that stamp).
-        stamped = _stamp_ns(msg.header.stamp) is not None
+        stamped = stamp_or_none(msg.header.stamp) is not None
         self._publish(Time.from_msg(msg.header.stamp) if stamped else None)
 
     def _on_global_localization(self, _request, response: Trigger.Response):
@@ -262,21 +264,9 @@ class GridLocalizer(Node):
                 values["last_update_ms"] = f"{self.last_update_s * 1e3:.1f}"
         values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
         values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
-        status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if self.rejected else DiagnosticStatus.OK,
-            name=f"{self.get_name()}: grid localization",
-            message="messages rejected" if self.rejected else "ok",
-            hardware_id=self.get_fully_qualified_name(),
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
-        array = DiagnosticArray(status=[status])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self._diagnostics_pub.publish(array)
-
-
-def _stamp_ns(stamp) -> int | None:
-    """A header stamp in ns; None for an unset (zero) one."""
-    value = stamp.sec * 1_000_000_000 + stamp.nanosec
-    return value or None
+        problems = ["messages rejected"] if self.rejected else []
+        self._diagnostics_pub.publish(status_array(self, "grid localization", values,
+                                                   problems))
 
 
 main = main_for(GridLocalizer)

@@ -11,6 +11,7 @@ import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
 
 from estimation_nodes.core.kalman.landmarks import Observation
+from estimation_nodes.nodes.stamps import set_stamp
 
 #: PointCloud2 datatypes (sensor_msgs/PointField).
 FLOAT32, UINT32 = PointField.FLOAT32, PointField.UINT32
@@ -54,8 +55,7 @@ def landmark_cloud(stamp_ns: int, frame_id: str,
     """A frame's (id, range, bearing) observations as a cloud stamped ``stamp_ns``."""
     seen = list(seen)
     msg = PointCloud2()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
-    msg.header.frame_id = frame_id
+    set_stamp(msg.header, stamp_ns, frame_id)
     msg.fields = [PointField(name=name, offset=4 * i, datatype=datatype, count=1)
                   for i, (name, datatype) in enumerate((("x", FLOAT32), ("y", FLOAT32),
                                                          ("z", FLOAT32), ("id", UINT32)))]

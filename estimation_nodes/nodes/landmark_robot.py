@@ -27,6 +27,7 @@ from estimation_nodes.nodes.landmark_messages import landmark_cloud
 from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
+from estimation_nodes.nodes.stamps import set_stamp
 from estimation_nodes.params import topics
 from estimation_nodes.params.landmarks import build_landmark_robot_settings
 from estimation_nodes.params.specs import LANDMARK_ROBOT_SPECS
@@ -77,7 +78,7 @@ class LandmarkRobot(Node):
         stamp_ns = self.get_clock().now().nanoseconds
         self._publish_odometry(stamp_ns, v, w)
         truth = PoseStamped()
-        _stamp(truth.header, stamp_ns, "map")
+        set_stamp(truth.header, stamp_ns, "map")
         fill_pose(truth.pose, *self._pose.tolist())
         self._truth_pub.publish(truth)
         if self._steps % self._steps_per_frame == 0:
@@ -86,16 +87,11 @@ class LandmarkRobot(Node):
 
     def _publish_odometry(self, stamp_ns: int, v: float, w: float) -> None:
         odom = Odometry()
-        _stamp(odom.header, stamp_ns, "odom")
+        set_stamp(odom.header, stamp_ns, "odom")
         odom.child_frame_id = "base_link"
         fill_pose(odom.pose.pose, *self._odom_pose.tolist())
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = v, w
         self._odom_pub.publish(odom)
-
-
-def _stamp(header, stamp_ns: int, frame_id: str) -> None:
-    header.stamp.sec, header.stamp.nanosec = divmod(stamp_ns, 1_000_000_000)
-    header.frame_id = frame_id
 
 
 main = main_for(LandmarkRobot)

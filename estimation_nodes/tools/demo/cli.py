@@ -17,7 +17,6 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-
 from estimation_nodes.params import topics
 from estimation_nodes.params.param_files import check_params_file
 from estimation_nodes.params.scenarios import scenario_kind

@@ -28,6 +28,7 @@ from estimation_nodes.nodes.grid_messages import planar_pose
 from estimation_nodes.nodes.qos import latched_qos
 from estimation_nodes.params import topics
 from estimation_nodes.tools.demo.graph_runtime import NodeStart, run_graph
+
 #: Within this of the truth an update counts as localized (the issue's 0.3 m and 10 deg).
 NEAR_M, NEAR_DEG = 0.3, 10.0
 

@@ -26,7 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation_nodes.nodes.grid_messages import fill_pose
 from estimation_nodes.nodes.landmark_messages import landmark_cloud
+from estimation_nodes.nodes.stamps import set_stamp
 from estimation_nodes.tools.importers import carmen, utias
 from estimation_nodes.tools.recording.mcap import McapRunWriter, RecordingError
 
@@ -41,14 +43,7 @@ def _ns(t: float) -> int:
 
 
 def _stamp(header, t: float, frame_id: str) -> None:
-    ns = _ns(t)
-    header.stamp.sec, header.stamp.nanosec = divmod(ns, 1_000_000_000)
-    header.frame_id = frame_id
-
-
-def _fill_pose(pose, x: float, y: float, yaw: float) -> None:
-    pose.position.x, pose.position.y = float(x), float(y)
-    pose.orientation.z, pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+    set_stamp(header, _ns(t), frame_id)
 
 
 class _Writer:
@@ -92,13 +87,13 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None) -> list[st
         writer.add("/scan", scan.t, msg)
         truth = PoseStamped()
         _stamp(truth.header, scan.t, "map")
-        _fill_pose(truth.pose, *scan.pose)
+        fill_pose(truth.pose, *scan.pose)
         writer.add("/ground_truth", scan.t, truth)
     for sample in log.odometry:
         odom = Odometry()
         _stamp(odom.header, sample.t, "odom")
         odom.child_frame_id = "base_link"
-        _fill_pose(odom.pose.pose, *sample.pose)
+        fill_pose(odom.pose.pose, *sample.pose)
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = sample.tv, sample.rv
         writer.add("/odom", sample.t, odom)
     writer.close()
@@ -126,7 +121,7 @@ def import_utias(directory: Path, robot: int, out: Path,
         odom = Odometry()
         _stamp(odom.header, t, "odom")
         odom.child_frame_id = "base_link"
-        _fill_pose(odom.pose.pose, *pose)
+        fill_pose(odom.pose.pose, *pose)
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = float(v), float(w)
         writer.add("/odom", t, odom)
     for t, rows in run.frames():
@@ -135,7 +130,7 @@ def import_utias(directory: Path, robot: int, out: Path,
     for t, x, y, theta in run.truth:
         truth = PoseStamped()
         _stamp(truth.header, t, "map")
-        _fill_pose(truth.pose, x, y, theta)
+        fill_pose(truth.pose, x, y, theta)
         writer.add("/ground_truth", t, truth)
     writer.close()
     target = landmarks_file or out.with_suffix(".landmarks.yaml")

@@ -20,16 +20,14 @@ from pathlib import Path
 import numpy as np
 
 from estimation_nodes.core.grid.mapping import MappingModel, OccupancyGridMapper
+from estimation_nodes.nodes.grid_messages import planar_pose
+from estimation_nodes.nodes.stamps import stamp_ns
 from estimation_nodes.params.map_files import write_map_file
 from estimation_nodes.tools.recording.mcap import RecordingError
 
 
 def _stamp_ns(msg) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
-def _yaw(q) -> float:
-    return math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z))
+    return stamp_ns(msg.header.stamp)
 
 
 def recorded(path: Path) -> tuple[list, list]:
@@ -70,8 +68,7 @@ def build_map(scans: list, poses: list, resolution: float, laser: tuple[float, f
         if abs(times[k] - t) > max_gap_s * 1e9:
             left_out += 1
             continue
-        p = poses[k].pose
-        x, y, yaw = p.position.x, p.position.y, _yaw(p.orientation)
+        x, y, yaw = planar_pose(poses[k].pose)
         c, s = math.cos(yaw), math.sin(yaw)
         sensor = (x + c * laser[0] - s * laser[1], y + s * laser[0] + c * laser[1],
                   yaw + laser[2])
