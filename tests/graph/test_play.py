@@ -38,15 +38,19 @@ def test_every_message_is_played_in_its_order_with_a_clock(recording, collector_
                                                            executor, processes):
     seen = collector_factory({"/scan": (LaserScan, qos_profile_sensor_data),
                               "/odom": (Odometry, INPUT_QOS), "/clock": (Clock, 10)})
+    # The player counts our subscriptions before they may know its publishers; the delay
+    # lets our side of each match complete before the first message (see play.py).
     player = processes([*PLAY, str(recording), "--rate", "4", "--clock",
-                        "--topics", "/scan", "odom", "--wait-for-subscribers", "30"])
+                        "--topics", "/scan", "odom", "--wait-for-subscribers", "30",
+                        "--delay", "3"])
     assert spin_until(executor, lambda: player.poll() is not None, 60), "the play never ended"
     output = player.stdout.read()
     assert player.returncode == 0, output
     # /ground_truth was not asked for: 2 scans and 6 odometry messages were played.
     assert "8 messages published" in output
     # Best effort may lose a scan on a loaded machine; odometry is reliable.
-    assert spin_until(executor, lambda: seen.count("/odom") == 6, 10), seen.count("/odom")
+    assert spin_until(executor, lambda: seen.count("/odom") == 6, 10), \
+        [stamp_s(m) for m in seen.messages["/odom"]]
     assert [stamp_s(m) for m in seen.messages["/odom"]] == pytest.approx(
         [0.01, 1.01, 1.02, 2.01, 3.01, 3.02])
     assert {stamp_s(m) for m in seen.messages["/scan"]} <= {1.02, 3.02}

@@ -1,7 +1,7 @@
 """estimation_play: a recording's messages published again, with their recorded timing.
 
     estimation_play run.mcap [--rate R] [--topics /scan /odom ...] [--clock]
-                    [--wait-for-subscribers SECONDS]
+                    [--wait-for-subscribers SECONDS] [--delay SECONDS]
 
 Each message goes out at its recorded time (the log time, scaled by 1/R), as its
 recorded CDR bytes, with the QoS its driver would use: a laser scan best effort
@@ -9,6 +9,13 @@ recorded CDR bytes, with the QoS its driver would use: a laser scan best effort
 /clock at each message's time, for nodes run with ``use_sim_time:=true``.
 ``ros2 bag play`` does this where rosbag2 is installed; it is not on PyPI, and this
 is the package's stand-in (the recordings stay readable by ros2 bag and Foxglove).
+
+DDS matches the two ends of a topic each on its own: a publisher can count a
+subscriber before that subscriber knows the publisher, and a message sent in between
+is lost to it. ``--delay`` (as ``ros2 bag play --delay``) leaves time for that after
+the wait. Before it ends, the play waits (up to ``ACK_TIMEOUT_S``) until every reliable
+message was acknowledged, as ``ros2 bag play --wait-for-all-acked`` does: a process
+that ends at once can take its last unacknowledged messages with it.
 """
 
 from __future__ import annotations
@@ -29,6 +36,8 @@ BEST_EFFORT_TYPES = {"sensor_msgs/msg/LaserScan"}
 LATCHED_TYPES = {"nav_msgs/msg/OccupancyGrid"}
 #: How long a play waits, at most, between two /clock messages (wall s) in a long gap.
 CLOCK_TICK_S = 0.05
+#: How long a play waits, at most, for its reliable messages to be acknowledged (s).
+ACK_TIMEOUT_S = 5.0
 
 
 @dataclass(frozen=True)
@@ -120,6 +129,22 @@ class Player:
             self._publishers[message.topic].publish(message.data)
         return len(self._messages)
 
+    def wait_for_acknowledgements(self, timeout_s: float) -> list[str]:
+        """Wait until the reliable topics' subscribers acknowledged every message; the
+        topics still waiting after ``timeout_s``."""
+        from rclpy.duration import Duration
+        from rclpy.qos import ReliabilityPolicy
+
+        deadline = time.monotonic() + timeout_s
+        waiting = []
+        for topic, publisher in self._publishers.items():
+            if publisher.qos_profile.reliability != ReliabilityPolicy.RELIABLE:
+                continue
+            left = max(0.0, deadline - time.monotonic())
+            if not publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9))):
+                waiting.append(topic)
+        return waiting
+
     def _wait_until(self, due: float, first: int, rate: float, started: float) -> None:
         """Sleep until ``due`` (monotonic s), ticking /clock through a long gap so that a
         use_sim_time node's timers keep running."""
@@ -142,11 +167,16 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     parser.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="SECONDS",
                         help="before the first message, wait up to SECONDS for every "
                              "played topic to have a subscriber (default: start at once)")
+    parser.add_argument("--delay", type=float, default=0.0, metavar="SECONDS",
+                        help="sleep SECONDS before the first message, after the wait for "
+                             "subscribers (default: %(default)s)")
     args = parser.parse_args(argv)
     if not (math.isfinite(args.rate) and args.rate > 0):
         parser.error("--rate must be a finite number > 0")
     if not (math.isfinite(args.wait_for_subscribers) and args.wait_for_subscribers >= 0):
         parser.error("--wait-for-subscribers must be a finite number >= 0")
+    if not (math.isfinite(args.delay) and args.delay >= 0):
+        parser.error("--delay must be a finite number >= 0")
     return args
 
 
@@ -187,11 +217,16 @@ def _run(args: argparse.Namespace, messages: list[Recorded]) -> int:
                               args.wait_for_subscribers):
                 print(f"estimation_play: no subscriber yet on {', '.join(player.unmatched())};"
                       f" playing anyway", file=sys.stderr)
+        time.sleep(args.delay)
         span = (messages[-1].log_time_ns - messages[0].log_time_ns) / 1e9
         print(f"estimation_play: {len(messages)} messages on "
               f"{len({m.topic for m in messages})} topics, {span:.1f} s of recording at "
               f"rate {args.rate:g}", flush=True)
         print(f"estimation_play: {player.play(args.rate)} messages published", flush=True)
+        unacknowledged = player.wait_for_acknowledgements(ACK_TIMEOUT_S)
+        if unacknowledged:
+            print(f"estimation_play: not every message was acknowledged on "
+                  f"{', '.join(unacknowledged)} within {ACK_TIMEOUT_S:g} s", file=sys.stderr)
     except KeyboardInterrupt:
         print("estimation_play: interrupted", file=sys.stderr)
         code = 130
