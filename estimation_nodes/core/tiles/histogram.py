@@ -41,6 +41,7 @@ from estimation_nodes.core.validation import (
     as_real_array,
     check_integer,
     check_probabilities,
+    values_within,
     short,
 )
 
@@ -211,9 +212,9 @@ def correct(
                                 f"{belief.size} values, got {short(out)}")
     # NaN or inf in either makes the evidence NaN or inf, which _correct refuses; a
     # negative value has to be looked for.
-    if not belief.min() >= 0.0:
+    if not values_within(belief, 0.0, math.inf):
         raise InvalidInputError(f"belief: expected weights >= 0, got {short(belief)}")
-    if not likelihood.min() >= 0.0:
+    if not values_within(likelihood, 0.0, math.inf):
         raise InvalidInputError(f"likelihood: expected values >= 0, got {short(likelihood)}")
     return _correct(belief, likelihood, out, compiled=compiled)
 
