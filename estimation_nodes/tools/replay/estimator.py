@@ -243,6 +243,13 @@ def main(argv: list[str] | None = None) -> None:
     except (RecordingError, ValueError) as error:
         print(f"estimation_replay: {error}", file=sys.stderr)
         sys.exit(2)
+    if not any(comparison.compared.values()):
+        # A landmarks run or an imported log has none of the estimator's outputs:
+        # nothing compared must not read as EQUAL.
+        print(f"estimation_replay: {args.recording}: no estimate of the estimator or the "
+              f"grid localizer in it, nothing to compare (a landmarks run or an imported "
+              f"log is not replayed yet)", file=sys.stderr)
+        sys.exit(2)
     for topic, count in sorted(recording.counts.items()):
         print(f"  {topic}: {plural(count, 'message')}")
     for topic, count in comparison.compared.items():
