@@ -161,6 +161,8 @@ def values_within(array: FloatArray, lowest: float, highest: float) -> bool:
     """Whether every value of ``array`` is in [lowest, highest]; NaN is not."""
     if array.size <= SMALL_ARRAY:
         return all(lowest <= v <= highest for v in array.ravel().tolist())
+    if highest == math.inf:   # one pass: the min is NaN where any value is
+        return bool(array.min() >= lowest)
     return bool(array.min() >= lowest and array.max() <= highest)   # NaN fails both
 
 
