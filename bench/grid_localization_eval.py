@@ -4,6 +4,7 @@ confidently wrong.
     python bench/grid_localization_eval.py [--seeds 20] [--seconds 60]
     python bench/grid_localization_eval.py --map MAP.yaml [--map ...] [--building SEED ...]
         [--laser-range 12] [--resolution 0.1] [--heading-bins 72] [--runs global]
+        [--independent-beams K ...]
 
 The simulated robot (core/sim/planar.py, as planar_robot runs it with its
 defaults: 10 Hz, 0.5 m/s, a seeded wandering route, odometry and scan noise)
@@ -24,7 +25,9 @@ By default the shipped maps: the corridor with a 4 m laser (its doorways
 repeat every 2.2 m, so the belief stays multi-modal until the robot sees its
 alcove or an end) and the office with a 12 m one. ``--map`` takes any
 map_server map instead and ``--building SEED`` a building drawn from a seed
-(bench/building_map.py): maps no parameter was tuned on.
+(bench/building_map.py): maps no parameter was tuned on. ``--independent-beams``
+runs the localizer with that ``laser_independent_beams`` instead of its default,
+a row for each value given.
 """
 
 from __future__ import annotations

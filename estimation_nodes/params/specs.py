@@ -262,7 +262,7 @@ GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
               read_only=True, min_value=1, max_value=200_000_000),
     ParamSpec("max_beams", 60, "Beams of a scan used, evenly chosen among the valid ones.",
               read_only=True, min_value=1, max_value=10000),
-    ParamSpec("laser_independent_beams", 60, "A scan corrects the belief as this many "
+    ParamSpec("laser_independent_beams", 40, "A scan corrects the belief as this many "
               "independent beams: with more beams used, the log likelihood of the scan is "
               "scaled by this number over theirs (a tempered likelihood), since neighbouring "
               "beams' errors are correlated; max_beams or more: every beam independent.",
