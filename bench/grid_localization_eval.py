@@ -4,6 +4,7 @@ confidently wrong.
     python bench/grid_localization_eval.py [--seeds 20] [--seconds 60]
     python bench/grid_localization_eval.py --map MAP.yaml [--map ...] [--building SEED ...]
         [--laser-range 12] [--resolution 0.1] [--heading-bins 72] [--runs global]
+        [--independent-beams K ...]
 
 The simulated robot (core/sim/planar.py, as planar_robot runs it with its
 defaults: 10 Hz, 0.5 m/s, a seeded wandering route, odometry and scan noise)
@@ -24,12 +25,15 @@ By default the shipped maps: the corridor with a 4 m laser (its doorways
 repeat every 2.2 m, so the belief stays multi-modal until the robot sees its
 alcove or an end) and the office with a 12 m one. ``--map`` takes any
 map_server map instead and ``--building SEED`` a building drawn from a seed
-(bench/building_map.py): maps no parameter was tuned on.
+(bench/building_map.py): maps no parameter was tuned on. ``--independent-beams``
+runs the localizer with that ``laser_independent_beams`` instead of its default,
+a row for each value given.
 """
 
 from __future__ import annotations
 
 import argparse
+import itertools
 import math
 import sys
 import tempfile
@@ -75,10 +79,13 @@ class MapRun:
     heading_bins: int
 
 
-def run(case: MapRun, seed: int, seconds: float, kidnap: bool) -> dict:
+def run(case: MapRun, seed: int, seconds: float, kidnap: bool,
+        independent_beams: int | None = None) -> dict:
     values = spec_defaults(GRID_LOCALIZER_SPECS)
     values.update(map_file=str(case.path), laser_max_range=case.laser_range,
                   resolution=case.resolution, heading_bins=case.heading_bins)
+    if independent_beams is not None:
+        values.update(laser_independent_beams=independent_beams)
     settings = build_grid_localizer_settings(values)
     robot_values = spec_defaults(PLANAR_ROBOT_SPECS)
     robot_values.update(map_file=str(case.path), laser_max_range=case.laser_range)
@@ -167,44 +174,49 @@ def main() -> None:
     parser.add_argument("--heading-bins", type=int, default=72, help="for --map, --building")
     parser.add_argument("--runs", default="global,kidnap",
                         help="global, kidnap or both (comma-separated)")
+    parser.add_argument("--independent-beams", type=int, action="append", default=[],
+                        help="the localizer's laser_independent_beams instead of its default; "
+                             "several: a row for each")
     args = parser.parse_args()
     kinds = [kind == "kidnap" for kind in args.runs.split(",")]
     grid.compiled_kernels(grid.COMPILED_MIN_STATES)
     rows = []
+    default_beams = spec_defaults(GRID_LOCALIZER_SPECS)["laser_independent_beams"]
     seeds = range(args.first_seed, args.first_seed + args.seeds)
     with tempfile.TemporaryDirectory() as scratch:
-        for case in map_runs(args, Path(scratch)):
-            for kidnap in kinds:
-                started = time.perf_counter()
-                results = [run(case, seed, args.seconds, kidnap) for seed in seeds]
-                found = sum(r["found"] for r in results)
-                first = np.median([r["first"] for r in results])
-                last = np.median([r["last"] for r in results])
-                wrong = sum(r["confidently_wrong"] for r in results)
-                confident = sum(r["confident"] for r in results)
-                updates = sum(r["updates"] for r in results)
-                row = [case.name, f"{case.laser_range:g} m",
-                       "kidnapped at half time" if kidnap else "global",
-                       f"{found} / {len(results)}", f"{first:.3f}", f"{last:.3f}",
-                       f"{confident} / {updates}"]
-                # After a kidnapping the belief is rightly sure of the old place until the
-                # scans disagree: confidently wrong counts in global runs only.
-                row += ["-", "-"] if kidnap else [
-                    f"{wrong} / {updates}",
-                    f"{sum(r['confidently_wrong'] > 0 for r in results)} / {len(results)}"]
-                if kidnap:
-                    dropped = np.median([r["after_kidnap"] for r in results])
-                    again = [r["found_after"] for r in results if r["found_after"] is not None]
-                    row += [f"{dropped:.3f}", f"{len(again)} / {len(results)}, median "
-                            f"{np.median(again):.1f} s" if again else "0"]
-                else:
-                    row += ["-", "-"]
-                row.append(f"{time.perf_counter() - started:.0f} s")
-                rows.append(row)
-                print(f"  {case.name} {'kidnap' if kidnap else 'global'}: done", flush=True)
+        for case, kidnap, beams in itertools.product(map_runs(args, Path(scratch)), kinds,
+                                                      args.independent_beams or [None]):
+            started = time.perf_counter()
+            results = [run(case, seed, args.seconds, kidnap, beams) for seed in seeds]
+            found = sum(r["found"] for r in results)
+            first = np.median([r["first"] for r in results])
+            last = np.median([r["last"] for r in results])
+            wrong = sum(r["confidently_wrong"] for r in results)
+            confident = sum(r["confident"] for r in results)
+            updates = sum(r["updates"] for r in results)
+            row = [case.name, f"{case.laser_range:g} m", str(beams or default_beams),
+                   "kidnapped at half time" if kidnap else "global",
+                   f"{found} / {len(results)}", f"{first:.3f}", f"{last:.3f}",
+                   f"{confident} / {updates}"]
+            # After a kidnapping the belief is rightly sure of the old place until the
+            # scans disagree: confidently wrong counts in global runs only.
+            row += ["-", "-"] if kidnap else [
+                f"{wrong} / {updates}",
+                f"{sum(r['confidently_wrong'] > 0 for r in results)} / {len(results)}"]
+            if kidnap:
+                dropped = np.median([r["after_kidnap"] for r in results])
+                again = [r["found_after"] for r in results if r["found_after"] is not None]
+                row += [f"{dropped:.3f}", f"{len(again)} / {len(results)}, median "
+                        f"{np.median(again):.1f} s" if again else "0"]
+            else:
+                row += ["-", "-"]
+            row.append(f"{time.perf_counter() - started:.0f} s")
+            rows.append(row)
+            print(f"  done: {' | '.join(str(cell) for cell in row)}", flush=True)
     print(f"seeds {seeds.start}..{seeds.stop - 1}, {args.seconds:g} s of wandering each, no "
           f"initial pose")
-    print(table(["map", "laser range", "run", "within 0.3 m and 10 deg at the end",
+    print(table(["map", "laser range", "independent beams", "run",
+                 "within 0.3 m and 10 deg at the end",
                  "quality at the first update (median)", "quality at the end (median)",
                  "updates with quality >= 0.8",
                  "confidently wrong updates (quality >= 0.8, off > 0.5 m or 30 deg)",

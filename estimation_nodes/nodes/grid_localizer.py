@@ -231,7 +231,9 @@ class GridLocalizer(Node):
         estimate = self.localization.estimate(self._settings.quality_radius,
                                               self._settings.quality_angle)
         stamp_msg = (stamp or self.get_clock().now()).to_msg()
-        # The quality first: a monitor that shows it beside the pose then has it in time.
+        # The quality first, then its pose. A subscriber pairs them by this order of
+        # publication (the source timestamps), not by the order its callbacks run, which
+        # may take a ready pose before the quality that came with it (tools/demo/grid_run.py).
         self._quality_pub.publish(Float64(data=estimate.quality))
         msg = pose_with_covariance(self._pose_msg, estimate.pose, estimate.covariance)
         msg.header.stamp = stamp_msg

@@ -48,6 +48,7 @@ class GridLocalizerSettings:
     max_odom_jump: float
     kidnap_probability: float
     max_beams: int
+    independent_beams: int
     quality_radius: float
     #: quality_angle, in radians.
     quality_angle: float
@@ -62,7 +63,8 @@ class GridLocalizerSettings:
     def localization(self, model: GridModel) -> GridLocalization:
         """A new belief on ``model`` with this update rule, uniform over the free cells."""
         return GridLocalization(model, self.noise, self.update_min_d, self.update_min_a,
-                                self.max_odom_jump, self.kidnap_probability)
+                                self.max_odom_jump, self.kidnap_probability,
+                                self.independent_beams)
 
 
 def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSettings:
@@ -79,6 +81,7 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
         values["max_states"], occupancy, model, update_min_d=values["update_min_d"],
         update_min_a=values["update_min_a"], max_odom_jump=values["max_odom_jump"],
         kidnap_probability=values["kidnap_probability"], max_beams=values["max_beams"],
+        independent_beams=values["laser_independent_beams"],
         quality_radius=values["quality_radius"],
         quality_angle=math.radians(values["quality_angle"]), frame_id=values["frame_id"],
         history_depth=values["history_depth"], diagnostics_period=values["diagnostics_period"])

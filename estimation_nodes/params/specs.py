@@ -262,6 +262,11 @@ GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
               read_only=True, min_value=1, max_value=200_000_000),
     ParamSpec("max_beams", 60, "Beams of a scan used, evenly chosen among the valid ones.",
               read_only=True, min_value=1, max_value=10000),
+    ParamSpec("laser_independent_beams", 40, "A scan corrects the belief as this many "
+              "independent beams: with more beams used, the log likelihood of the scan is "
+              "scaled by this number over theirs (a tempered likelihood), since neighbouring "
+              "beams' errors are correlated; max_beams or more: every beam independent.",
+              read_only=True, min_value=1, max_value=10000),
     ParamSpec("update_min_d", 0.25, "Translation (m) that triggers a filter update.",
               read_only=True, min_value=0.0, max_value=100.0),
     ParamSpec("update_min_a", 0.2, "Rotation (rad) that triggers a filter update.",

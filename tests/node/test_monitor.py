@@ -42,3 +42,50 @@ def test_a_republished_belief_is_counted_for_its_own_step(context, executor):
     finally:
         source.destroy_node()
         monitor.destroy_node()
+
+
+def test_the_grid_monitor_pairs_each_pose_with_its_own_quality(context, executor):
+    # grid_localizer publishes an update's quality, then its pose. Three updates are
+    # waiting when the monitor spins: an executor that takes a ready pose before the
+    # ready quality would pair it with the previous update's quality.
+    from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
+    from rclpy.node import Node
+    from std_msgs.msg import Float64
+
+    from estimation_nodes.tools.demo.grid_run import GridMonitor
+
+    monitor = GridMonitor(quiet=True, sinks=[], context=context)
+    source = Node("simulated_localizer", context=context)
+    executor.add_node(monitor)
+    executor.add_node(source)
+    try:
+        truth = source.create_publisher(PoseStamped, topics.TRUE_POSE, latched_qos(100))
+        quality = source.create_publisher(Float64, topics.LOCALIZATION_QUALITY,
+                                          latched_qos(100))
+        pose = source.create_publisher(PoseWithCovarianceStamped, topics.POSE,
+                                       latched_qos(100))
+        assert spin_until(executor, lambda: all(monitor.count_publishers(topic) for topic in (
+            topics.TRUE_POSE, topics.POSE, topics.LOCALIZATION_QUALITY)), 10.0)
+        published = []
+        for step in range(3):
+            at = PoseStamped()
+            at.header.stamp.sec = step + 1
+            at.pose.orientation.w = 1.0
+            truth.publish(at)
+        for step, value in enumerate((0.1, 0.95, 0.3)):
+            update = PoseWithCovarianceStamped()
+            update.header.stamp.sec = step + 1
+            update.pose.pose.position.x = float(step)
+            update.pose.pose.orientation.w = 1.0
+            quality.publish(Float64(data=value))
+            pose.publish(update)
+            published.append(value)
+        record = monitor.record
+        assert spin_until(executor, lambda: len(record.updates) == 3, 10.0)
+        assert [u[3] for u in record.updates] == published
+        assert [u[1] for u in record.updates] == [0.0, 1.0, 2.0]
+    finally:
+        executor.remove_node(source)
+        executor.remove_node(monitor)
+        source.destroy_node()
+        monitor.destroy_node()

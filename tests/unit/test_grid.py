@@ -224,3 +224,27 @@ def test_the_compiled_prediction_equals_numpys(delta):
     slow = grid.correct_scan(belief, model, ranges, angles, compiled=False)
     np.testing.assert_allclose(fast[0], slow[0], rtol=1e-12, atol=1e-300)
     assert fast[1] == pytest.approx(slow[1], rel=1e-12)
+
+
+def test_a_scan_of_more_beams_than_independent_ones_is_a_tempered_likelihood():
+    model = small_model()
+    belief = random_belief(model)
+    ranges, angles = RNG.uniform(0.1, 0.6, 12), RNG.uniform(-math.pi, math.pi, 12)
+    log_likelihood = grid.scan_log_likelihood(model, ranges, angles)
+    tempered = grid.correct_scan(belief, model, ranges, angles, independent_beams=4)
+    expected = grid.correct(belief, log_likelihood * 4 / 12)
+    np.testing.assert_allclose(tempered[0], expected[0], rtol=1e-12, atol=1e-300)
+    assert tempered[1] == pytest.approx(expected[1], rel=1e-12)
+    # As many independent beams as beams, or more: the scan's own likelihood.
+    exact = grid.correct(belief, log_likelihood)
+    for independent in (12, 100):
+        np.testing.assert_allclose(
+            grid.correct_scan(belief, model, ranges, angles, independent_beams=independent)[0],
+            exact[0], rtol=1e-12, atol=1e-300)
+    assert grid.scan_weight(20, 60) == pytest.approx(1 / 3)
+
+
+@pytest.mark.parametrize("bad", [0, -3, 2.5, "4", None])
+def test_independent_beams_below_one_or_not_a_count_are_refused(bad):
+    with pytest.raises(errors.InvalidInputError, match="independent_beams"):
+        grid.scan_weight(bad, 10)

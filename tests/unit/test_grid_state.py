@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from estimation_nodes.core.errors import InvalidInputError
 from estimation_nodes.core.grid.localization import GridLocalization
 from estimation_nodes.params.grid import default_odometry_noise
 from tests.unit.test_grid import small_model
@@ -60,3 +61,15 @@ def test_kidnap_probability_keeps_a_uniform_share():
     loc.update(np.array([0.3]), np.array([0.0]), 1 * SECOND)
     assert loc.belief.min() > 0
     assert loc.belief.sum() == pytest.approx(1.0)
+
+
+def test_independent_beams_temper_the_scan_and_a_bad_count_is_refused():
+    exact, tempered = localization(), localization(independent_beams=2)
+    ranges, angles = np.full(6, 0.5), np.linspace(-math.pi, math.pi, 6, endpoint=False)
+    for loc in (exact, tempered):
+        loc.on_odometry((0.0, 0.0, 0.0), 1 * SECOND)
+        loc.update(ranges, angles, 1 * SECOND)
+    assert tempered.belief.max() < exact.belief.max()
+    assert tempered.entropy_bits() > exact.entropy_bits()
+    with pytest.raises(InvalidInputError, match="independent_beams"):
+        localization(independent_beams=0)

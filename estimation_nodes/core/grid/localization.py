@@ -6,6 +6,10 @@ carried anywhere since the last update), so a kidnapped robot is found again
 by the scans alone; 0 keeps the exact filter (recovery through
 ``global_localization``).
 
+With ``independent_beams`` K, a scan of N > K beams corrects with its likelihood raised
+to K / N (``steps.scan_weight``): its beams are not N independent measurements, and
+taken as such they make the belief sure of a place the next scans may rule out.
+
 As AMCL: odometry is followed continuously, and a scan updates the filter
 (a prediction with the motion since the last update, then the correction)
 only once the robot moved ``update_min_d`` or turned ``update_min_a`` since
@@ -58,7 +62,8 @@ class GridLocalization:
 
     def __init__(self, model: grid.GridModel, noise: grid.OdometryNoise, update_min_d: float,
                  update_min_a: float, max_odom_jump: float,
-                 kidnap_probability: float = 0.0) -> None:
+                 kidnap_probability: float = 0.0,
+                 independent_beams: int | None = None) -> None:
         if not isinstance(model, grid.GridModel):
             raise InvalidInputError(f"model: expected a GridModel, got {type(model).__name__}")
         if not isinstance(noise, grid.OdometryNoise):
@@ -71,8 +76,11 @@ class GridLocalization:
         if kidnap_probability > 1.0:
             raise InvalidInputError(
                 f"kidnap_probability: expected a probability in [0, 1], got {kidnap_probability}")
+        if independent_beams is not None:
+            grid.scan_weight(independent_beams, 1)   # raises on a count below 1
         self.model = model
         self.noise = noise
+        self._independent_beams = independent_beams
         # Load a large grid's compiled kernels now, not during the first scan.
         grid.compiled_kernels(int(np.prod(model.shape)))
         self._min_d, self._min_a, self._max_jump = update_min_d, update_min_a, max_odom_jump
@@ -162,7 +170,10 @@ class GridLocalization:
             # The robot may have been carried anywhere: a little of the belief everywhere,
             # so a kidnapped robot is found again by the scans alone.
             belief = (1.0 - self._kidnap) * belief + self._kidnap * self._uniform
-        self.belief, self.log_evidence = grid._correct_scan(belief, self.model, ranges, angles)
+        weight = 1.0 if self._independent_beams is None else \
+            grid.scan_weight(self._independent_beams, ranges.size)
+        self.belief, self.log_evidence = grid._correct_scan(belief, self.model, ranges, angles,
+                                                            weight=weight)
         self._reference = pose
         self.updates += 1
 

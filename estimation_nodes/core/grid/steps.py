@@ -542,20 +542,43 @@ def _padded_field(model: GridModel, offsets: np.ndarray) -> tuple[FloatArray, in
 
 
 def correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angles: FloatArray,
-                 compiled: bool = True) -> tuple[FloatArray, float]:
+                 compiled: bool = True,
+                 independent_beams: int | None = None) -> tuple[FloatArray, float]:
     """``correct`` with a scan: posterior and log evidence. (A compiled kernel that also
     weighted each row as soon as its beams were summed measured slower: numba's scalar exp
-    costs more than the pass numpy's vectorized one needs.)"""
+    costs more than the pass numpy's vectorized one needs.)
+
+    ``independent_beams`` K: the scan counts as K independent beams, not N (see
+    ``scan_weight``); None: every beam is independent of the others."""
     _check_model(model)
     belief = check_belief(belief, model)
     ranges, angles = check_scan(ranges, angles)
-    return _correct_scan(belief, model, ranges, angles, compiled)
+    weight = 1.0 if independent_beams is None else scan_weight(independent_beams, ranges.size)
+    return _correct_scan(belief, model, ranges, angles, compiled, weight)
+
+
+def scan_weight(independent_beams: int, beams: int) -> float:
+    """min(1, K / N): the power the likelihood of N beams is raised to when they carry the
+    information of K independent ones (a tempered likelihood). Neighbouring beams' errors
+    are correlated (the same grid's heading and position quantization, the same odometry
+    error, the same unmapped object), so the product of N beam likelihoods is far sharper
+    than what the scan tells; AMCL's beam skipping and Thrun et al.'s advice to use a
+    subset of beams are the same remedy."""
+    independent_beams = check_integer("independent_beams", independent_beams)
+    if independent_beams < 1:
+        raise InvalidInputError(f"independent_beams: expected >= 1, got {independent_beams}")
+    return min(1.0, independent_beams / beams) if beams else 1.0
 
 
 def _correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angles: FloatArray,
-                  compiled: bool = True) -> tuple[FloatArray, float]:
-    return _correct_in(_scan_log_likelihood(model, ranges, angles, compiled), belief,
-                       lambda: _scan_log_likelihood(model, ranges, angles, compiled))
+                  compiled: bool = True, weight: float = 1.0) -> tuple[FloatArray, float]:
+    def log_likelihood() -> FloatArray:
+        total = _scan_log_likelihood(model, ranges, angles, compiled)
+        if weight != 1.0:
+            np.multiply(total, weight, out=total)
+        return total
+
+    return _correct_in(log_likelihood(), belief, log_likelihood)
 
 
 def _correct_in(log_likelihood: FloatArray, belief: FloatArray,

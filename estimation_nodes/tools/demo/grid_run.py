@@ -16,7 +16,9 @@ from __future__ import annotations
 
 import math
 import time
+from collections import deque
 from dataclasses import dataclass, field
+from typing import Any
 from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -55,6 +57,53 @@ class GridRecord:
         return "\n".join(lines)
 
 
+class QualityOfPose:
+    """Each pose with the localization_quality published for it, by the publisher's source
+    timestamps: grid_localizer publishes an update's quality just before its pose, while a
+    subscriber's callbacks for two topics run in no set order (an executor that finds both
+    ready may take the pose first, and the latest quality it holds is then the previous
+    update's). A pose's quality is the latest published after the pose before it and not
+    after it; a pose waits until that quality has come, or is shown without one (NaN)
+    once a later quality says its own is lost."""
+
+    def __init__(self) -> None:
+        self._qualities: deque[tuple[int, float]] = deque(maxlen=1000)
+        #: (published ns, the pose before's published ns or None, what to pair).
+        self._waiting: deque[tuple[int, int | None, Any]] = deque()
+        self._previous: int | None = None
+
+    def quality(self, published_ns: int, value: float) -> list[tuple[Any, float]]:
+        self._qualities.append((published_ns, value))
+        return self._paired()
+
+    def pose(self, published_ns: int, item: Any) -> list[tuple[Any, float]]:
+        """``item`` (what to keep of the pose) and each pose now paired, in order."""
+        self._waiting.append((published_ns, self._previous, item))
+        self._previous = published_ns
+        return self._paired()
+
+    def rest(self) -> list[tuple[Any, float]]:
+        """The poses still waiting, without a quality."""
+        rest = [(item, math.nan) for _, _, item in self._waiting]
+        self._waiting.clear()
+        return rest
+
+    def _paired(self) -> list[tuple[Any, float]]:
+        paired = []
+        while self._waiting:
+            published, before, item = self._waiting[0]
+            own = [value for at, value in self._qualities
+                   if at <= published and (before is None or at > before)]
+            if own:
+                paired.append((item, own[-1]))
+            elif any(at > published for at, _ in self._qualities):
+                paired.append((item, math.nan))
+            else:
+                break
+            self._waiting.popleft()
+        return paired
+
+
 def topic_types(kind: str) -> dict[str, str]:
     """The run's topics as the nodes resolve them in the root namespace."""
     types = topics.GRID_TOPIC_TYPES if kind == "grid" else topics.LANDMARK_TOPIC_TYPES
@@ -64,22 +113,22 @@ def topic_types(kind: str) -> dict[str, str]:
 class GridMonitor(Node):
     """Subscribes to the run's grid topics; prints and keeps each update; feeds raw sinks."""
 
-    def __init__(self, quiet: bool, sinks: list, kind: str = "grid") -> None:
-        super().__init__("estimation_demo_grid_monitor")
+    def __init__(self, quiet: bool, sinks: list, kind: str = "grid", **kwargs: Any) -> None:
+        super().__init__("estimation_demo_grid_monitor", **kwargs)
         self.record = GridRecord()
         #: Whether the localizer has published an estimate: it is ready for the robot.
         self.localizer_ready = False
         self._quiet, self._sinks, self._kind = quiet, sinks, kind
         self._truth: dict[tuple[int, int], tuple[float, float, float]] = {}
-        self._quality = float("nan")
+        self._qualities = QualityOfPose()
         self._entropy = float("nan")
         self._started = time.monotonic()
         self.create_subscription(PoseStamped, topics.TRUE_POSE, self._on_truth,
                                  latched_qos(1000))
         self.create_subscription(PoseWithCovarianceStamped, topics.POSE, self._on_pose,
                                  latched_qos(1000))
-        self.create_subscription(Float64, topics.LOCALIZATION_QUALITY,
-                                 lambda m: setattr(self, "_quality", m.data), latched_qos(1000))
+        self.create_subscription(Float64, topics.LOCALIZATION_QUALITY, self._on_quality,
+                                 latched_qos(1000))
         self.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, self._on_diagnostics, 10)
         if sinks:
             self._raw_subscriptions()
@@ -109,21 +158,45 @@ class GridMonitor(Node):
                 if pair.key == "belief_entropy_bits":
                     self._entropy = float(pair.value)
 
-    def _on_pose(self, msg) -> None:
+    def _on_quality(self, msg: Float64, info: dict) -> None:
+        self._show(self._qualities.quality(_published_ns(info), msg.data))
+
+    def _on_pose(self, msg, info: dict) -> None:
         self.localizer_ready = True
         truth = self._truth.get((msg.header.stamp.sec, msg.header.stamp.nanosec))
         if truth is None:
-            return                     # before the robot moved: no truth for that time
+            # Before the robot moved: no truth for that time. Its quality is still its own.
+            self._show(self._qualities.pose(_published_ns(info), None))
+            return
         x, y, yaw = planar_pose(msg.pose.pose)
         error = math.hypot(x - truth[0], y - truth[1])
         angle = abs(math.degrees(math.remainder(yaw - truth[2], 2 * math.pi)))
-        elapsed = time.monotonic() - self._started
-        self.record.updates.append((elapsed, error, angle, self._quality, self._entropy))
-        if not self._quiet:
-            print(f"t {elapsed:5.1f} s  update {len(self.record.updates):3d}  pose ({x:6.2f}, "
-                  f"{y:6.2f}, {math.degrees(yaw):6.1f} deg)  error {error:5.2f} m "
-                  f"{angle:5.1f} deg  quality {self._quality:.3f}  entropy "
-                  f"{self._entropy:.1f} bits", flush=True)
+        update = (time.monotonic() - self._started, (x, y, yaw), error, angle, self._entropy)
+        if self._kind == "grid":
+            self._show(self._qualities.pose(_published_ns(info), update))
+        else:                           # a landmark localizer publishes no quality
+            self._show([(update, math.nan)])
+
+    def finish(self) -> None:
+        """Keep the poses whose quality never came, without one."""
+        self._show(self._qualities.rest())
+
+    def _show(self, paired: list) -> None:
+        for update, quality in paired:
+            if update is None:
+                continue
+            elapsed, (x, y, yaw), error, angle, entropy = update
+            self.record.updates.append((elapsed, error, angle, quality, entropy))
+            if not self._quiet:
+                print(f"t {elapsed:5.1f} s  update {len(self.record.updates):3d}  pose "
+                      f"({x:6.2f}, {y:6.2f}, {math.degrees(yaw):6.1f} deg)  error "
+                      f"{error:5.2f} m {angle:5.1f} deg  quality {quality:.3f}  entropy "
+                      f"{entropy:.1f} bits", flush=True)
+
+
+def _published_ns(info: dict) -> int:
+    """When the publisher wrote the message (its DDS source timestamp)."""
+    return int(info.get("source_timestamp") or info.get("received_timestamp") or 0)
 
 
 #: Each kind's localizer and simulated robot.
@@ -144,4 +217,7 @@ def run(params: Path, args, sinks: list, kind: str = "grid") -> tuple[int, GridR
         NodeStart(localizer),
         NodeStart(robot, ("-p", "exit_when_done:=true"), ready=ready),
     ], robot, args.timeout, args.linger)
-    return code, monitor.record if monitor is not None else GridRecord()
+    if monitor is None:
+        return code, GridRecord()
+    monitor.finish()
+    return code, monitor.record
