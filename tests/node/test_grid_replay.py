@@ -180,7 +180,7 @@ def test_a_run_in_which_the_localizer_left_scans_out_replays_equal(context, exec
                                                           "heading_bins": 8}}}
     writer = McapRunWriter(path, {**{t: _type(k) for t, k in INPUTS.items()},
                                   **{t: _type(k) for t, k in OUTPUTS.items()}},
-                           {"parameters_yaml": yaml.safe_dump(parameters)})
+                           {"parameters_yaml": yaml.safe_dump(parameters), "kind": "grid"})
     for topic, data, published_ns in driver.written:
         writer.write(topic, data, published_ns, published_ns)
     writer.close()
