@@ -53,6 +53,7 @@ from estimation_nodes.nodes.parameters import (
 )
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.process_memory import keep_freed_memory
+from estimation_nodes.nodes.stamps import published_ns
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.nodes.rclpy_internals import (
     INCOMPATIBLE_QOS,
@@ -233,8 +234,7 @@ class Estimator(Node):
                                  f"{raw_vector_topic} dropped: {error}")
                     return
             # The publisher's clock: the order of events across topics and hosts.
-            stamp = info.get("source_timestamp") or info.get("received_timestamp") \
-                or time.time_ns()
+            stamp = published_ns(info)
             if self._order is None:
                 self._event_stamp_ns = stamp
                 handler(msg, True)

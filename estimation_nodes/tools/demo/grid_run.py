@@ -28,6 +28,7 @@ from std_msgs.msg import Float64
 
 from estimation_nodes.nodes.grid_messages import planar_pose
 from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.nodes.stamps import published_ns
 from estimation_nodes.params import topics
 from estimation_nodes.tools.demo.graph_runtime import NodeStart, run_graph
 
@@ -159,21 +160,21 @@ class GridMonitor(Node):
                     self._entropy = float(pair.value)
 
     def _on_quality(self, msg: Float64, info: dict) -> None:
-        self._show(self._qualities.quality(_published_ns(info), msg.data))
+        self._show(self._qualities.quality(published_ns(info), msg.data))
 
     def _on_pose(self, msg, info: dict) -> None:
         self.localizer_ready = True
         truth = self._truth.get((msg.header.stamp.sec, msg.header.stamp.nanosec))
         if truth is None:
             # Before the robot moved: no truth for that time. Its quality is still its own.
-            self._show(self._qualities.pose(_published_ns(info), None))
+            self._show(self._qualities.pose(published_ns(info), None))
             return
         x, y, yaw = planar_pose(msg.pose.pose)
         error = math.hypot(x - truth[0], y - truth[1])
         angle = abs(math.degrees(math.remainder(yaw - truth[2], 2 * math.pi)))
         update = (time.monotonic() - self._started, (x, y, yaw), error, angle, self._entropy)
         if self._kind == "grid":
-            self._show(self._qualities.pose(_published_ns(info), update))
+            self._show(self._qualities.pose(published_ns(info), update))
         else:                           # a landmark localizer publishes no quality
             self._show([(update, math.nan)])
 
@@ -192,11 +193,6 @@ class GridMonitor(Node):
                       f"({x:6.2f}, {y:6.2f}, {math.degrees(yaw):6.1f} deg)  error "
                       f"{error:5.2f} m {angle:5.1f} deg  quality {quality:.3f}  entropy "
                       f"{entropy:.1f} bits", flush=True)
-
-
-def _published_ns(info: dict) -> int:
-    """When the publisher wrote the message (its DDS source timestamp)."""
-    return int(info.get("source_timestamp") or info.get("received_timestamp") or 0)
 
 
 #: Each kind's localizer and simulated robot.
