@@ -1,5 +1,6 @@
 """Record a run to MCAP, read it with the mcap tools, replay it offline, plot it."""
 
+import re
 import subprocess
 
 import numpy as np
@@ -61,6 +62,14 @@ def decoded_by_topic(path):
     return header, by_topic, schemas
 
 
+def compared_and_largest_difference(replay_output: str, topic: str) -> tuple[int, float]:
+    """What estimation_replay printed for ``topic``: estimates compared, largest difference."""
+    found = re.search(rf"^{topic}: (\d+) estimates compared, largest difference (\S+?)[;\n]",
+                      replay_output, re.M)
+    assert found, replay_output
+    return int(found.group(1)), float(found.group(2))
+
+
 def test_example_6_14_recording_has_every_topic_and_replays_exactly(ros_env, tmp_path):
     mcap_path, png_path = record_run(ros_env, tmp_path, "example_6_14")
     header, by_topic, schemas = decoded_by_topic(mcap_path)
@@ -91,9 +100,12 @@ def test_seeded_random_run_records_all_topics_and_replays_exactly(ros_env, tmp_p
     replay = subprocess.run([executable("estimation_replay"), str(mcap_path)], env=ros_env,
                             capture_output=True, text=True, timeout=60)
     assert replay.returncode == 0, replay.stdout + replay.stderr
+    assert "online vs offline to 1e-09: EQUAL" in replay.stdout, replay.stdout
     for topic in ("belief", "belief_predicted", "kalman_estimate", "kalman_state"):
-        assert f"{topic}: 40 estimates compared, largest difference 0" in replay.stdout, \
-            replay.stdout
+        compared, largest = compared_and_largest_difference(replay.stdout, topic)
+        # Equal up to rounding: BLAS's dot product may round by an ulp differently for an
+        # array at another address, as a belief computed again after a late event is.
+        assert compared == 40 and largest <= 1e-12, replay.stdout
 
     plot = subprocess.run([executable("estimation_plot"), str(mcap_path), "-o",
                            str(tmp_path / "from_recording.png")], env=ros_env,
