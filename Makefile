@@ -14,6 +14,13 @@ ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 ROS_DOMAIN_ID ?= 42
 export ROS_AUTOMATIC_DISCOVERY_RANGE ROS_DOMAIN_ID
 
+# The suite runs in PYTEST_WORKERS processes (pytest-xdist), a test file per worker at a
+# time: most graph tests wait on DDS and timers, so two workers halve the wall time on two
+# cores. Each test reserves a ROS domain of its own, so the workers never hear each other.
+# PYTEST_WORKERS=0 runs it in one process.
+PYTEST_WORKERS ?= 2
+XDIST := -n $(PYTEST_WORKERS) --dist loadfile
+
 .PHONY: demo test test-under-load bench install clean
 
 $(BIN)/python:
@@ -33,12 +40,12 @@ demo: $(STAMP)
 	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/estimation_demo $(DEMO_ARGS)
 
 test: $(STAMP)
-	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/python -m pytest $(PYTEST_ARGS)
+	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/python -m pytest $(XDIST) $(PYTEST_ARGS)
 
 # The same suite with every core kept busy by other processes (.ci/test-under-load starts
 # them and ends each by its pid); LOAD_PROCESSES sets how many (default: one per core).
 test-under-load: $(STAMP)
-	VENV=$(VENV) PYTHON=$(PYTHON) .ci/test-under-load $(PYTEST_ARGS)
+	VENV=$(VENV) PYTHON=$(PYTHON) .ci/test-under-load $(XDIST) $(PYTEST_ARGS)
 
 # Benchmarks print tables of figures with ratios to references measured in the
 # same run (see bench/README.md); they assert nothing and take a few minutes.
