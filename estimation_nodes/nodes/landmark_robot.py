@@ -7,6 +7,9 @@ truly is. At ``camera_rate_hz`` its camera sees the landmarks within range and
 field of view, with the ``range_std``, ``range_std_per_m`` and ``bearing_std`` of
 its parameters, as one ``landmark_observations`` cloud per frame. The simulator's
 noise comes from its own parameters; a scenario file gives the localizer the same.
+With ``hold_until_matched`` it starts only once the nodes of ``hold_for_nodes``
+(the localizer, and a recorder if one is named) hear its odom and camera, so
+they miss none of its run.
 """
 
 from __future__ import annotations
@@ -23,11 +26,13 @@ from sensor_msgs.msg import PointCloud2
 from estimation_nodes.core.kalman import unicycle
 from estimation_nodes.core.sim import landmarks as simulated
 from estimation_nodes.nodes.grid_messages import fill_pose
+from estimation_nodes.nodes.held_publisher import HOLD_CHECK_PERIOD_S
 from estimation_nodes.nodes.landmark_messages import landmark_cloud
 from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.nodes.stamps import set_stamp
+from estimation_nodes.nodes.subscribers import start_once_heard
 from estimation_nodes.params import topics
 from estimation_nodes.params.landmarks import build_landmark_robot_settings
 from estimation_nodes.params.specs import LANDMARK_ROBOT_SPECS
@@ -58,11 +63,18 @@ class LandmarkRobot(Node):
         self._cloud_pub = self.create_publisher(PointCloud2, topics.LANDMARK_OBSERVATIONS,
                                                 INPUT_QOS)
         self._truth_pub = self.create_publisher(PoseStamped, topics.TRUE_POSE, latched_qos(1))
-        self.create_timer(self._dt, self._step)
         self.get_logger().info(
             f"ready: {len(settings.landmarks)} landmarks, start ({self._pose[0]:.2f}, "
             f"{self._pose[1]:.2f}, {math.degrees(self._pose[2]):.0f} deg), seed "
             f"{settings.seed}")
+        if not settings.hold_until_matched:
+            self._start()
+            return
+        start_once_heard(self, (self._odom_pub, self._cloud_pub), settings.hold_for_nodes,
+                         self._start, "odom and landmark_observations", HOLD_CHECK_PERIOD_S)
+
+    def _start(self) -> None:
+        self.create_timer(self._dt, self._step)
 
     def _step(self) -> None:
         settings = self._settings

@@ -32,7 +32,7 @@ from estimation_nodes.nodes.held_publisher import HOLD_CHECK_PERIOD_S
 from estimation_nodes.nodes.parameters import ConfigurationError, declare_and_build
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import latched_qos
-from estimation_nodes.nodes.subscribers import missing_subscribers
+from estimation_nodes.nodes.subscribers import start_once_heard
 from estimation_nodes.params import topics
 from estimation_nodes.params.grid import PlanarRobotSettings, build_planar_robot_settings
 from estimation_nodes.params.specs import PLANAR_ROBOT_SPECS
@@ -80,28 +80,13 @@ class PlanarRobot(Node):
             f"ready: map {occupancy.cells.shape[1]} x {occupancy.cells.shape[0]} cells, start "
             f"({self._pose[0]:.2f}, {self._pose[1]:.2f}, {math.degrees(self._pose[2]):.0f} "
             f"deg), seed {seed}")
-        if not settings.hold_until_matched or not self._missing():
-            self.create_timer(self._dt, self._step)
+        if not settings.hold_until_matched:
+            self._start()
             return
-        self.get_logger().info(f"waiting for {', '.join(settings.hold_for_nodes) or 'a node'}"
-                               f" to hear odom and scan before moving")
-        self._hold_timer = self.create_timer(HOLD_CHECK_PERIOD_S, self._start_when_heard)
+        start_once_heard(self, (self._odom_pub, self._scan_pub), settings.hold_for_nodes,
+                         self._start, "odom and scan", HOLD_CHECK_PERIOD_S)
 
-    def _missing(self) -> list[str]:
-        """Which nodes of hold_for_nodes do not hear odom or scan yet."""
-        missing: list[str] = []
-        for publisher in (self._odom_pub, self._scan_pub):
-            if publisher.get_subscription_count() == 0:
-                return list(self._settings.hold_for_nodes) or ["(any subscriber)"]
-            missing += [name for name in missing_subscribers(
-                self, publisher, self._settings.hold_for_nodes) if name not in missing]
-        return missing
-
-    def _start_when_heard(self) -> None:
-        if self._missing():
-            return
-        self.destroy_timer(self._hold_timer)
-        self.get_logger().info("odom and scan are heard: moving")
+    def _start(self) -> None:
         self.create_timer(self._dt, self._step)
 
     def _initial_pose(self, settings: PlanarRobotSettings) -> planar.Pose:

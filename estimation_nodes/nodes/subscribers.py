@@ -11,7 +11,7 @@ shows is matched.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Sequence
 
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
@@ -60,3 +60,36 @@ def _compatible(publisher_qos, subscription_qos) -> bool:
         return False
     return not (subscription_qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
                 and publisher_qos.durability == DurabilityPolicy.VOLATILE)
+
+
+def missing_on_every(node: Node, publishers: Sequence, required: Sequence[str]) -> list[str]:
+    """Which of the ``required`` nodes do not hear every one of ``publishers`` yet (with none
+    named: ``["(any subscriber)"]`` until each publisher has a subscriber)."""
+    missing: list[str] = []
+    for publisher in publishers:
+        if publisher.get_subscription_count() == 0:
+            return list(required) or ["(any subscriber)"]
+        missing += [name for name in missing_subscribers(node, publisher, required)
+                    if name not in missing]
+    return missing
+
+
+def start_once_heard(node: Node, publishers: Sequence, required: Sequence[str],
+                     start: Callable[[], None], what: str, period_s: float) -> None:
+    """Call ``start`` now if the ``required`` nodes hear every one of ``publishers``, else
+    once they do (looked at every ``period_s``): a simulated robot that starts moving
+    before its localizer has matched its topics sends its first messages to nobody."""
+    if not missing_on_every(node, publishers, required):
+        start()
+        return
+    node.get_logger().info(f"waiting for {', '.join(required) or 'a node'} to hear {what} "
+                           f"before moving")
+
+    def check() -> None:
+        if missing_on_every(node, publishers, required):
+            return
+        node.destroy_timer(timer)
+        node.get_logger().info(f"{what} are heard: moving")
+        start()
+
+    timer = node.create_timer(period_s, check)

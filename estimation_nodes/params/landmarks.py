@@ -155,6 +155,8 @@ class LandmarkRobotSettings:
     initial_pose: np.ndarray
     duration: float
     exit_when_done: bool
+    hold_until_matched: bool
+    hold_for_nodes: tuple[str, ...]
 
 
 def build_landmark_robot_settings(values: Mapping[str, Any]) -> LandmarkRobotSettings:
@@ -174,7 +176,8 @@ def build_landmark_robot_settings(values: Mapping[str, Any]) -> LandmarkRobotSet
         landmarks, noise, camera, int(values["seed"]), _robot("rate_hz", values["rate_hz"]),
         _robot("camera_rate_hz", values["camera_rate_hz"]), _robot("speed", values["speed"]),
         _robot("turn_rate", values["turn_rate"]), pose, _robot("duration", values["duration"]),
-        bool(values["exit_when_done"]))
+        bool(values["exit_when_done"]), bool(values["hold_until_matched"]),
+        tuple(name for name in values["hold_for_nodes"] if name))
 
 
 def _sensor_pose(values: Mapping[str, Any]) -> SensorPose:

@@ -424,6 +424,15 @@ LANDMARK_ROBOT_SPECS = tuple(
               max_value=1e6),
     ParamSpec("exit_when_done", False, "End the process when duration is over.",
               read_only=True),
+    ParamSpec("hold_until_matched", True,
+              "Start moving (the first odom and camera frame) only once the nodes of "
+              "hold_for_nodes (any subscriber, if it is empty) are matched on odom and "
+              "landmark_observations: a localizer or a recorder started with the robot misses "
+              "none of its run.", read_only=True),
+    replace(HOLD_FOR_NODES, default=["ekf_localizer"], description=(
+        "Nodes (names relative to this node's namespace, or absolute) whose subscriptions "
+        "to odom and landmark_observations must be matched before the robot starts, with "
+        "hold_until_matched; add a recorder's node to have it record the whole run.")),
 )
 
 #: Each node's parameters, by node name.

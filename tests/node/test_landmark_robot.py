@@ -78,7 +78,9 @@ def test_the_camera_sees_only_what_is_in_range_and_in_view(nodes, executor,
     seen = collector_factory({"landmark_observations": (PointCloud2, INPUT_QOS)})
     # Standing at the origin, facing landmark 19 at (1.2, -0.4): 1.26 m away, in view;
     # landmark 20 at (0.1, 1.1) is 1.1 m away but 1.8 rad off the axis, 18 is behind.
-    nodes(LandmarkRobot, seed=3, camera_max_range=2.0, camera_field_of_view=0.5,
+    # No localizer here: the robot starts without waiting for one to hear it.
+    nodes(LandmarkRobot, seed=3, hold_until_matched=False, camera_max_range=2.0,
+          camera_field_of_view=0.5,
           range_std=1e-6, range_std_per_m=0.0, bearing_std=1e-6, speed=0.0, turn_rate=0.0,
           initial_pose=[0.0, 0.0, math.atan2(-0.4, 1.2)],
           **{name: 0.0 for name in ("noise.translation_per_m", "noise.translation_per_rad",
