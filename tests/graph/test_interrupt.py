@@ -34,9 +34,12 @@ KINDS = {
     "localization": {"/**/motion_commander": {"max_commands": 6}},
     "tracking_2d": {"/**/motion_commander": {"max_commands": 6}},
     "grid_corridor": {"/**/planar_robot": {"duration": 3.0}},
+    # Long enough for the demo's monitor to match the robot's true_pose, which the robot
+    # does not wait for, and print an update (the "running" moment).
+    "landmarks": {"/**/landmark_robot": {"duration": 10.0}},
 }
-#: Nodes each run starts: the grid kinds the localizer and the robot, the others three.
-NODE_COUNT = {"grid_corridor": 2}
+#: Nodes each run starts: the localization kinds the localizer and the robot, the others three.
+NODE_COUNT = {"grid_corridor": 2, "landmarks": 2}
 DEMO_MOMENTS = ("loading", "first_node_starting", "last_node_starting", "running", "linger")
 #: What each node alone runs with, and the log line that says it runs.
 NODES = {

@@ -189,10 +189,12 @@ class GridMonitor(Node):
             elapsed, (x, y, yaw), error, angle, entropy = update
             self.record.updates.append((elapsed, error, angle, quality, entropy))
             if not self._quiet:
+                # A landmark localizer has neither quality nor a belief's entropy: no "nan".
+                grid_figures = (f"  quality {quality:.3f}  entropy {entropy:.1f} bits"
+                                if self._kind == "grid" else "")
                 print(f"t {elapsed:5.1f} s  update {len(self.record.updates):3d}  pose "
                       f"({x:6.2f}, {y:6.2f}, {math.degrees(yaw):6.1f} deg)  error "
-                      f"{error:5.2f} m {angle:5.1f} deg  quality {quality:.3f}  entropy "
-                      f"{entropy:.1f} bits", flush=True)
+                      f"{error:5.2f} m {angle:5.1f} deg{grid_figures}", flush=True)
 
 
 #: Each kind's localizer and simulated robot.
