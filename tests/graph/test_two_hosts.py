@@ -92,11 +92,16 @@ def finish(commander, recorder, estimator, startup: float) -> None:
     stop_process(recorder, grace=10.0)
 
 
-def replayed(recording: Path) -> str:
-    """estimation_replay over the recording; its output, asserting it found them equal."""
+def replayed(recording: Path, estimator: subprocess.Popen | None = None) -> str:
+    """estimation_replay over the recording; its output, asserting it found them equal. On a
+    difference the estimator (if given) is stopped and its log shown too: its warnings say
+    what it rejected, lost or applied out of order."""
     replay = subprocess.run([executable("estimation_replay"), str(recording)],
                             capture_output=True, text=True, timeout=120, cwd=REPO)
     print(replay.stdout)
+    if replay.returncode != 0 and estimator is not None:
+        stop_process(estimator, grace=10.0)
+        print("the estimator's log:\n" + estimator.stdout.read())
     assert replay.returncode == 0, replay.stdout + replay.stderr
     assert "EQUAL" in replay.stdout
     return replay.stdout
@@ -144,7 +149,7 @@ def test_seeded_run_across_hosts_equals_the_causal_filter(two_hosts, processes, 
         two_hosts.heal()
         healed_ns = time.time_ns()
     finish(commander, recorder, estimator, started - began)
-    output = replayed(recording)
+    output = replayed(recording, estimator)
     # Every reading the sensor sent was applied: 40 corrections, all equal to the filter
     # run offline in the order the events happened.
     assert compared(output, "belief") == 40 and compared(output, "belief_predicted") == 40
