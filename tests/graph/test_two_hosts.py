@@ -85,9 +85,15 @@ def wait_until_sending(commander: subprocess.Popen, timeout: float = 120.0) -> f
 
 def finish(commander, recorder, estimator, startup: float) -> None:
     """Once the commander is done and the recorder has every estimate (record_run's
-    "settled"; a miss: the replay says which are missing), stop the recorder."""
+    "settled"; a miss: the replay says which are missing), stop the recorder.
+
+    After a partition the estimator answers the backlog with hundreds of estimates per
+    topic at once; on a loaded machine some reach the recorder only after DDS has
+    repaired what the receiving socket dropped, a heartbeat period (3 s) at a time: a
+    minute was seen. Reliable delivery is promised, its time is not; the wait is long.
+    """
     assert commander.wait(timeout=120) == 0, commander.stdout.read()
-    wait_for_line(recorder, "settled", scaled(startup))
+    wait_for_line(recorder, "settled", scaled(startup, factor=20.0, floor=120.0))
     assert estimator.poll() is None, "the estimator died"
     stop_process(recorder, grace=10.0)
 
@@ -132,7 +138,7 @@ def test_example_6_14_across_two_hosts_is_the_book(two_hosts, processes, ros_env
     assert [round(v, 6) for v in run.corrected[-1]] == BOOK_FINAL_BELIEF
 
 
-@pytest.mark.timeout(300)
+@pytest.mark.timeout(360)
 @pytest.mark.parametrize("outage", [0.0, 5.0, 5.0], ids=["calm", "partition", "partition2"])
 def test_seeded_run_across_hosts_equals_the_causal_filter(two_hosts, processes, ros_env,
                                                           tmp_path, outage):
