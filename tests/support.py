@@ -16,8 +16,9 @@ def write_world(cells: int, directory: Path) -> Path:
     return path
 
 
-def large_world_params(directory: Path, cells: int, steps: int) -> Path:
-    """A parameter file for the tile graph on ``write_world(cells)``, ``steps`` moves of 1."""
+def large_world_params(directory: Path, cells: int, steps: int, history_depth: int = 1) -> Path:
+    """A parameter file for the tile graph on ``write_world(cells)``, ``steps`` moves of 1;
+    the estimator's outputs keep ``history_depth`` estimates."""
     world = write_world(cells, directory)
     model = (f"    world_file: {world}\n    classes: [bright, dark]\n"
              f"    sensor_model: [0.8, 0.2, 0.4, 0.6]\n    motion_kernel: [0.1, 0.8, 0.1]\n")
@@ -26,7 +27,7 @@ def large_world_params(directory: Path, cells: int, steps: int) -> Path:
         f"/**/motion_commander:\n  ros__parameters:\n    commands: [1]\n    repeat: true\n"
         f"    max_commands: {steps}\n    rate_hz: 4.0\n"
         f"/**/tile_sensor:\n  ros__parameters:\n{model}    seed: 3\n"
-        f"/**/estimator:\n  ros__parameters:\n{model}")
+        f"/**/estimator:\n  ros__parameters:\n{model}    history_depth: {history_depth}\n")
     return params
 
 

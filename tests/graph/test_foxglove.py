@@ -158,8 +158,11 @@ def test_a_client_that_never_reads_does_not_hold_up_the_run(ros_env, processes, 
     everything stops reading at once; the run still ends on its own, every estimate
     printed, and that client has got only part of the stream: the server dropped for it."""
     steps = 30
-    demo = processes(demo_command("--params-file", str(large_world_params(tmp_path, 100_000,
-                                                                            steps)),
+    # Every belief must reach the demo's monitor, and a reliable writer keeping only the
+    # latest (history_depth 1) replaces one that a busy monitor has not read yet: the
+    # estimator keeps them all (2 x 40 x 0.8 MB).
+    params = large_world_params(tmp_path, 100_000, steps, history_depth=steps + 10)
+    demo = processes(demo_command("--params-file", str(params),
                                   "--foxglove", "0", "--timeout", "150"))
     url = served_url(demo, "Foxglove live view on")
 
