@@ -331,42 +331,47 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     nodes = []
     sinks: list = []
     code = 0
-    try:
-        # Without rclpy's signal handler, as run_graph (graph_runtime.py) says why.
-        rclpy.init(args=["estimation_demo", *ros_args],
-                   signal_handler_options=SignalHandlerOptions.NO)
-        executor = SingleThreadedExecutor()
-        sinks = make_sinks(params, args)
-        nodes.append(make_monitor(args, sinks))
-        simulator = LinearSystem if simulator_for(params) == "linear_system" else TileSensor
-        for node_class in (Estimator, simulator, MotionCommander):
-            nodes.append(node_class())
-        for node in nodes:
-            executor.add_node(node)
-        commander = nodes[-1]
-        limit = commander.command_limit
-        done = spin_until(executor, lambda: limit is not None and commander.sent >= limit,
-                          args.timeout)
-        if not done:
-            print("estimation_demo: stopped early: timeout", file=sys.stderr)
-            code = 1
-        spin_until(executor, lambda: False, args.linger)
-    except ConfigurationError as error:
-        print(f"estimation_demo: invalid parameter {error}", file=sys.stderr)
-        code = 2
-    except (KeyboardInterrupt, ExternalShutdownException):
-        code = INTERRUPTED
-    finally:
-        with HeldInterrupts() as held:
+    # A Ctrl-C is noted and acted on between spins, as run_graph (graph_runtime.py) does.
+    held = HeldInterrupts()
+    with held:
+        try:
+            # Without rclpy's signal handler, as run_graph says why.
+            rclpy.init(args=["estimation_demo", *ros_args],
+                       signal_handler_options=SignalHandlerOptions.NO)
+            executor = SingleThreadedExecutor()
+            sinks = make_sinks(params, args)
+            nodes.append(make_monitor(args, sinks))
+            simulator = LinearSystem if simulator_for(params) == "linear_system" \
+                else TileSensor
+            for node_class in (Estimator, simulator, MotionCommander):
+                nodes.append(node_class())
+            for node in nodes:
+                executor.add_node(node)
+            commander = nodes[-1]
+            limit = commander.command_limit
+            done = spin_until(executor, lambda: held.noted or (
+                limit is not None and commander.sent >= limit), args.timeout)
+            if held.noted:
+                raise KeyboardInterrupt
+            if not done:
+                print("estimation_demo: stopped early: timeout", file=sys.stderr)
+                code = 1
+            spin_until(executor, lambda: held.noted, args.linger)
+        except ConfigurationError as error:
+            print(f"estimation_demo: invalid parameter {error}", file=sys.stderr)
+            code = 2
+        except (KeyboardInterrupt, ExternalShutdownException):
+            code = INTERRUPTED
+        finally:
             for node in nodes:
                 node.destroy_node()
             close_sinks(sinks)
             if executor is not None:
                 executor.shutdown(timeout_sec=1.0)
             rclpy.try_shutdown()
-        if held.noted or code == INTERRUPTED:
-            code = INTERRUPTED
-            signal.signal(signal.SIGINT, signal.SIG_IGN)   # the summary is printed whole
+    if held.noted or code == INTERRUPTED:
+        code = INTERRUPTED
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # the summary is printed whole
     return code, nodes[0].record if nodes else RunRecord()
 
 

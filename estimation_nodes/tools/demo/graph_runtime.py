@@ -110,9 +110,11 @@ def run_graph(params: Path, make_monitor: Callable[[], Any], starts: Sequence[No
     and the monitor (None if it could not be made).
 
     A Ctrl-C in any phase ends the run the same way: the children started so far are
-    stopped, none is left behind, nothing is printed but one line. rclpy's own signal
-    handler is left out: it would shut the context down under the run, and the spin would
-    raise ExternalShutdownException instead of KeyboardInterrupt.
+    stopped, none is left behind, nothing is printed but one line. It is noted, not raised
+    where it lands: a KeyboardInterrupt raised inside rclpy (the executor building a Task)
+    left half-made objects whose finalizers printed tracebacks. The spins look at the note
+    every 20 ms. rclpy's own signal handler is left out: it would shut the context down
+    under the run.
     """
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -121,33 +123,40 @@ def run_graph(params: Path, make_monitor: Callable[[], Any], starts: Sequence[No
     processes: dict[str, subprocess.Popen] = {}
     executor = monitor = None
     code = 0
-    try:
-        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-        executor = SingleThreadedExecutor()
-        monitor = make_monitor()
-        executor.add_node(monitor)
-        deadline = time.monotonic() + timeout
+    held = HeldInterrupts()
 
-        def any_ended() -> bool:
-            return any(p.poll() is not None for p in processes.values())
+    def check_interrupt() -> None:
+        if held.noted:
+            raise KeyboardInterrupt
 
-        for start in starts:
-            if start.ready is not None:
-                # A node that ended (a bad parameter) ends the wait and the run.
-                spin_until(executor, lambda s=start: s.ready(monitor) or any_ended(),
-                           deadline - time.monotonic())
-                if any_ended():
-                    break
-            with HeldInterrupts() as held:
+    with held:
+        try:
+            rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+            executor = SingleThreadedExecutor()
+            monitor = make_monitor()
+            executor.add_node(monitor)
+            deadline = time.monotonic() + timeout
+
+            def any_ended() -> bool:
+                return any(p.poll() is not None for p in processes.values())
+
+            for start in starts:
+                check_interrupt()
+                if start.ready is not None:
+                    # A node that ended (a bad parameter) ends the wait and the run.
+                    spin_until(executor, lambda s=start: held.noted or s.ready(monitor)
+                               or any_ended(), deadline - time.monotonic())
+                    check_interrupt()
+                    if any_ended():
+                        break
                 processes[start.name] = start_node(start.name, params, *start.overrides)
-            if held.noted:
-                raise KeyboardInterrupt
-        code = run_until_done(executor, processes, main, deadline, linger)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        code = INTERRUPTED
-    finally:
-        with HeldInterrupts() as held:
-            if code == INTERRUPTED:
+            code = run_until_done(executor, processes, main, deadline, linger,
+                                  interrupted=lambda: held.noted)
+            check_interrupt()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            code = INTERRUPTED
+        finally:
+            if code == INTERRUPTED or held.noted:
                 print("estimation_demo: interrupted, stopping the nodes", file=sys.stderr)
             stop_children(processes.values())
             if monitor is not None:
@@ -155,25 +164,30 @@ def run_graph(params: Path, make_monitor: Callable[[], Any], starts: Sequence[No
             if executor is not None:
                 executor.shutdown(timeout_sec=1.0)
             rclpy.try_shutdown()
-        if held.noted:
-            code = INTERRUPTED
-        if code == INTERRUPTED:
-            # The end has begun: the summary is printed whole, a second Ctrl-C is ignored.
-            signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if held.noted:
+        code = INTERRUPTED
+    if code == INTERRUPTED:
+        # The end has begun: the summary is printed whole, a second Ctrl-C is ignored.
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     return code, monitor
 
 
 def run_until_done(executor: Any, processes: dict[str, subprocess.Popen], main: str,
-                   deadline: float, linger: float) -> int:
+                   deadline: float, linger: float,
+                   interrupted: Callable[[], bool] = lambda: False) -> int:
     """Spin until a child ends; the run's exit code: 0 when ``main`` ended well (then spin
     ``linger`` s more), 1 on a timeout or an error, 2 when a node's parameter was invalid.
-    Says why on stderr."""
+    Says why on stderr. Returns at once (the code then does not matter) once
+    ``interrupted()`` holds."""
     import sys
 
     process = processes.get(main)
     finished = process is None or spin_until(
-        executor, lambda: any(p.poll() is not None for p in processes.values()),
+        executor, lambda: interrupted() or any(p.poll() is not None
+                                               for p in processes.values()),
         deadline - time.monotonic())
+    if interrupted():
+        return INTERRUPTED
     failed = {n: p.returncode for n, p in processes.items()
               if p.poll() is not None and p.returncode != 0}
     if not finished:
@@ -182,5 +196,5 @@ def run_until_done(executor: Any, processes: dict[str, subprocess.Popen], main: 
     if failed or process is None or process.poll() is None:
         print(f"estimation_demo: stopped early: exit codes {failed}", file=sys.stderr)
         return 2 if 2 in failed.values() else 1
-    spin_until(executor, lambda: False, linger)
+    spin_until(executor, interrupted, linger)
     return 0
