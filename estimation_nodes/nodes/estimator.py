@@ -483,9 +483,9 @@ class Estimator(Node):
 
 
 def main(args: list[str] | None = None) -> None:
-    # A process-wide choice, so it is made here and not in the node: see process_memory.py.
-    keep_freed_memory()
-    main_for(Estimator)(args)
+    # A process-wide choice, so it is made here and not in the node (process_memory.py);
+    # inside run()'s handling, where a Ctrl-C during it ends the node quietly.
+    main_for(Estimator, prepare=keep_freed_memory)(args)
 
 
 if __name__ == "__main__":

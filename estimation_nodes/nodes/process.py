@@ -17,8 +17,10 @@ from estimation_nodes.nodes.rclpy_internals import RCLError
 from estimation_nodes.params.param_files import check_params_file, params_files_in
 
 
-def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> int:
-    """Run one node until Ctrl-C or shutdown, the way the Jazzy demos do.
+def run(node_class: Callable[..., Node], args: Sequence[str] | None = None,
+        prepare: Callable[[], None] | None = None) -> int:
+    """Run one node until Ctrl-C or shutdown, the way the Jazzy demos do; ``prepare`` (a
+    process-wide set-up) runs first, where a Ctrl-C ends the process as in any phase.
 
     Returns the process exit code: 0 on a normal end, 2 when a parameter is
     invalid (one log line names it), 1 on an unexpected error.
@@ -33,6 +35,8 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None) -> i
     try:
         if not end_with_parent():
             return 0
+        if prepare is not None:
+            prepare()
         try:
             for path in params_files_in(argv):
                 check_params_file(path)
@@ -91,10 +95,11 @@ def end_with_parent() -> bool:
     return str(os.getppid()) == expected
 
 
-def main_for(node_class: Callable[..., Node]) -> Callable[[], None]:
-    """A console-script entry point for ``node_class``."""
+def main_for(node_class: Callable[..., Node],
+             prepare: Callable[[], None] | None = None) -> Callable[[], None]:
+    """A console-script entry point for ``node_class`` (``prepare``: see ``run``)."""
 
     def main(args: Sequence[str] | None = None) -> None:
-        sys.exit(run(node_class, args))
+        sys.exit(run(node_class, args, prepare))
 
     return main
