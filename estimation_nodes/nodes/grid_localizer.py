@@ -259,6 +259,8 @@ class GridLocalizer(Node):
                 "quality": f"{estimate.quality:.4f}",
                 "belief_entropy_bits": f"{self.localization.entropy_bits():.4f}",
                 "updates": self.localization.updates,
+                "window_states": self.localization.window_states,
+                "last_dropped_probability": f"{self.localization.last_dropped:.3g}",
             })
             if math.isfinite(self.localization.log_evidence):
                 values["last_log_evidence"] = f"{self.localization.log_evidence:.4f}"

@@ -47,6 +47,7 @@ class GridLocalizerSettings:
     update_min_a: float
     max_odom_jump: float
     kidnap_probability: float
+    belief_floor: float
     max_beams: int
     independent_beams: int
     quality_radius: float
@@ -64,7 +65,7 @@ class GridLocalizerSettings:
         """A new belief on ``model`` with this update rule, uniform over the free cells."""
         return GridLocalization(model, self.noise, self.update_min_d, self.update_min_a,
                                 self.max_odom_jump, self.kidnap_probability,
-                                self.independent_beams)
+                                self.independent_beams, self.belief_floor)
 
 
 def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSettings:
@@ -81,6 +82,7 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
         values["max_states"], occupancy, model, update_min_d=values["update_min_d"],
         update_min_a=values["update_min_a"], max_odom_jump=values["max_odom_jump"],
         kidnap_probability=values["kidnap_probability"], max_beams=values["max_beams"],
+        belief_floor=values["belief_floor"],
         independent_beams=values["laser_independent_beams"],
         quality_radius=values["quality_radius"],
         quality_angle=math.radians(values["quality_angle"]), frame_id=values["frame_id"],

@@ -276,6 +276,12 @@ GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
               "cells before each correction, so a kidnapped robot is found again by its scans "
               "alone (0: the exact filter; ~/global_localization recovers).", read_only=True,
               min_value=0.0, max_value=0.5),
+    ParamSpec("belief_floor", 1e-9, "After each correction the states of less probability "
+              "than this are dropped (at most this x the states per update, reported in "
+              "/diagnostics) and the filter runs over the box of those left, grown by what "
+              "the motion reaches: a tracked robot costs its few square metres, not the "
+              "building. 0: the dense filter over every state.", read_only=True,
+              min_value=0.0, max_value=1e-3),
     ParamSpec("max_odom_jump", 1.0, "An odometry step longer than this (m) is a jump: "
               "dropped, counted, and the odometry followed from the new pose.",
               read_only=True, min_value=0.01, max_value=1000.0),

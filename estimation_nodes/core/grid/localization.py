@@ -18,6 +18,13 @@ then; the first scan corrects at once. An odometry step longer than
 as motion, and odometry is followed from the new pose. A step that fails
 (a scan every state rules out, an argument refused) leaves everything as it was.
 
+With ``belief_floor`` > 0 the states of less probability are dropped after each
+correction (their total is ``last_dropped``), and the steps run over the box of
+the states left, grown by what a prediction can reach (grid/window.py): a tracked
+robot's update then costs what its few square metres cost, not the building. The
+kidnap share then goes on a coarse lattice of one state in eight
+(``window.correct_with_kidnap``), scored with every scan. 0 keeps the dense filter.
+
 Each method checks what it is given (a pose of three finite numbers, a scan of
 readings as ``steps.check_scan`` says, a stamp that is an integer) and raises
 ``InvalidInputError`` naming it; the belief it holds is its own, so the steps
@@ -35,6 +42,7 @@ import numpy as np
 
 from estimation_nodes.core.errors import InvalidInputError
 from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid import window
 from estimation_nodes.core.validation import (
     FloatArray,
     check_integer,
@@ -63,7 +71,7 @@ class GridLocalization:
     def __init__(self, model: grid.GridModel, noise: grid.OdometryNoise, update_min_d: float,
                  update_min_a: float, max_odom_jump: float,
                  kidnap_probability: float = 0.0,
-                 independent_beams: int | None = None) -> None:
+                 independent_beams: int | None = None, belief_floor: float = 0.0) -> None:
         if not isinstance(model, grid.GridModel):
             raise InvalidInputError(f"model: expected a GridModel, got {type(model).__name__}")
         if not isinstance(noise, grid.OdometryNoise):
@@ -78,6 +86,10 @@ class GridLocalization:
                 f"kidnap_probability: expected a probability in [0, 1], got {kidnap_probability}")
         if independent_beams is not None:
             grid.scan_weight(independent_beams, 1)   # raises on a count below 1
+        belief_floor = check_non_negative("belief_floor", belief_floor)
+        if belief_floor >= 1.0:
+            raise InvalidInputError(f"belief_floor: expected a probability below 1, got "
+                                    f"{belief_floor}")
         self.model = model
         self.noise = noise
         self._independent_beams = independent_beams
@@ -85,9 +97,14 @@ class GridLocalization:
         grid.compiled_kernels(int(np.prod(model.shape)))
         self._min_d, self._min_a, self._max_jump = update_min_d, update_min_a, max_odom_jump
         self._kidnap = kidnap_probability
-        self._uniform = grid.uniform_over_free(model) if kidnap_probability > 0 else None
+        self._floor = belief_floor
+        self._free_states = int(model.free.sum()) * model.heading_bins
         self.belief: FloatArray = grid.uniform_over_free(model)
+        #: The box of the states with probability (the whole grid with belief_floor 0).
+        self._box = window.full_box(model)
         self.log_evidence = float("nan")
+        #: The probability belief_floor dropped at the last update.
+        self.last_dropped = 0.0
         #: The odometry pose at the last update (None: no update yet) and the latest one.
         self._reference: Pose | None = None
         self._latest: Pose | None = None
@@ -97,13 +114,33 @@ class GridLocalization:
 
     def global_localization(self) -> None:
         """Not knowing where the robot is: uniform over the free cells."""
-        self.belief = grid.uniform_over_free(self.model)
+        self._hold(grid.uniform_over_free(self.model), window.full_box(self.model))
         self.log_evidence = float("nan")
 
     def set_prior(self, pose: Pose, covariance: FloatArray) -> None:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
         x, y, yaw = grid.check_pose("pose", pose)
-        self.belief = grid.gaussian_prior(self.model, x, y, yaw, covariance)
+        prior = grid.gaussian_prior(self.model, x, y, yaw, covariance)
+        self._hold(prior, window.full_box(self.model))
+
+    def _hold(self, belief: FloatArray, box: window.Box) -> None:
+        """Take ``belief``, the window ``box``'s (zero outside it), as the belief: with
+        belief_floor > 0 without its states below the floor, and their box noted."""
+        belief, self.last_dropped = window.drop_below(belief, self._floor)
+        if box == window.full_box(self.model):
+            self.belief = belief
+        else:
+            r0, r1, c0, c1 = self._box
+            self.belief[:, r0:r1, c0:c1] = 0.0
+            r0, r1, c0, c1 = box
+            self.belief[:, r0:r1, c0:c1] = belief
+        if self._floor > 0:
+            support = window.support_box(belief)
+            assert support is not None   # drop_below keeps the largest state
+            r0, _, c0, _ = box
+            self._box = (r0 + support[0], r0 + support[1], c0 + support[2], c0 + support[3])
+        else:
+            self._box = box
 
     def on_odometry(self, pose: Pose, stamp_ns: int | None = None) -> bool:
         """Follow odometry; False when the step was a jump (not taken as motion)."""
@@ -162,35 +199,67 @@ class GridLocalization:
         if pose is None:
             raise InvalidInputError(
                 "stamp_ns: no odometry yet: the motion since the last update is unknown")
-        belief = self.belief
-        if self._reference is not None:
-            delta = grid.odometry_delta(self._reference, pose)
-            belief = grid._predict(belief, self.model, delta, self.noise)
-        if self._uniform is not None:
-            # The robot may have been carried anywhere: a little of the belief everywhere,
-            # so a kidnapped robot is found again by the scans alone.
-            belief = (1.0 - self._kidnap) * belief + self._kidnap * self._uniform
+        delta = None if self._reference is None else grid.odometry_delta(self._reference, pose)
+        box = self._box if delta is None else window.grown_box(self._box, self.model, delta,
+                                                               self.noise)
+        dense_kidnap = self._kidnap > 0.0 and self._floor == 0.0
+        if dense_kidnap:
+            box = window.full_box(self.model)
+        model, belief = self._window(box)
+        if delta is not None:
+            belief = grid._predict(belief, model, delta, self.noise)
         weight = 1.0 if self._independent_beams is None else \
             grid.scan_weight(self._independent_beams, ranges.size)
-        self.belief, self.log_evidence = grid._correct_scan(belief, self.model, ranges, angles,
-                                                            weight=weight)
+        left_out = 0.0
+        if self._kidnap > 0.0 and not dense_kidnap:
+            posterior, box, log_evidence, left_out = window.correct_with_kidnap(
+                belief, self.model, box, ranges, angles, weight, self._kidnap, self._floor)
+        else:
+            if dense_kidnap:
+                # The robot may have been carried anywhere: a little of the belief
+                # everywhere, so a kidnapped robot is found again by the scans alone.
+                belief = (1.0 - self._kidnap) * belief + \
+                    (self._kidnap / self._free_states) * model.free
+            posterior, log_evidence = grid._correct_scan(belief, self.model, ranges, angles,
+                                                         weight=weight, box=box)
+        self._hold(posterior, box)
+        self.last_dropped += left_out
+        self.log_evidence = log_evidence
         self._reference = pose
         self.updates += 1
+
+    @property
+    def window_states(self) -> int:
+        """The states the next update starts from: the belief's box, all headings."""
+        r0, r1, c0, c1 = self._box
+        return (r1 - r0) * (c1 - c0) * self.model.heading_bins
+
+    def _window(self, box: window.Box) -> tuple[grid.GridModel, FloatArray]:
+        """The map and the belief within ``box`` (the belief a copy: the steps may write
+        over it, and a failed step must leave the belief as it was)."""
+        if box == window.full_box(self.model):
+            return self.model, self.belief
+        return window.crop(self.model, box), window.window_of(self.belief, box)
 
     def estimate(self, radius: float, angle: float) -> Estimate:
         """The most likely pose, the covariance around it, and the probability within
         ``radius`` (m) and ``angle`` (rad) of it."""
         radius, angle = check_non_negative("radius", radius), check_non_negative("angle", angle)
-        state = grid._most_likely_state(self.belief)
-        pose = grid._pose_of(self.model, state)
-        return Estimate(pose, grid._covariance_around(self.belief, self.model, pose),
-                        grid._mass_near(self.belief, self.model, pose, radius, angle))
+        box, model = self._box, self.model
+        belief = window.window_of(self.belief, box)
+        pose = grid._pose_of(model, grid._most_likely_state(belief), box)
+        return Estimate(pose, grid._covariance_around(belief, model, pose, box),
+                        grid._mass_near(belief, model, pose, radius, angle, box))
 
     def belief_map(self) -> np.ndarray:
-        return grid._belief_map(self.belief)
+        belief = window.window_of(self.belief, self._box)
+        r0, r1, c0, c1 = self._box
+        picture = np.zeros(self.model.free.shape, dtype=np.int8)
+        picture[r0:r1, c0:c1] = grid._belief_map(belief)
+        return picture
 
     def entropy_bits(self) -> float:
-        return grid._entropy_bits(self.belief)
+        return grid._entropy_bits(window.window_of(self.belief, self._box))
 
 
 def _stamp(stamp_ns: int | None) -> int | None:

@@ -510,24 +510,57 @@ def scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray
 
 
 def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
-                         compiled: bool = True) -> FloatArray:
+                         compiled: bool = True,
+                         box: tuple[int, int, int, int] | None = None) -> FloatArray:
+    """The scan's log likelihood over every state, or over the states of the window
+    ``box`` (first row, row past the last, first column, column past the last; see
+    grid/window.py): (K, rows, columns) of the box."""
     if ranges.size * model.log_bound > LOG_SUM_LIMIT:
         raise InvalidInputError(f"ranges: {ranges.size} beams over log likelihoods as large "
                                 f"as {model.log_bound:g} would overflow their sum")
     offsets = _beam_endpoints(model, ranges, angles)
-    rows, cols = model.free.shape
     padded, pad_rows, pad_cols = _padded_field(model, offsets)
-    kernels = compiled_kernels(int(np.prod(model.shape)), compiled)
+    r0, r1, c0, c1 = box if box is not None else (0, model.free.shape[0], 0,
+                                                  model.free.shape[1])
+    # The window's cell (i, j) is the map's (r0 + i, c0 + j): the same field, read
+    # from further in.
+    pad_rows, pad_cols = pad_rows + r0, pad_cols + c0
+    rows, cols = r1 - r0, c1 - c0
+    shape = (model.heading_bins, rows, cols)
+    kernels = compiled_kernels(int(np.prod(shape)), compiled)
     if kernels is not None:
-        out = np.empty(model.shape)      # the kernel writes every element
+        out = np.empty(shape)      # the kernel writes every element
         kernels.scan_log_likelihood(padded, pad_rows, pad_cols, offsets, model.heading_bins,
                                     rows, cols, out)
         return out
-    total = np.zeros(model.shape)
+    total = np.zeros(shape)
     for k in range(model.heading_bins):
         layer = total[k]
         for dr, dc in offsets[k]:
             layer += padded[pad_rows + dr:pad_rows + dr + rows, pad_cols + dc:pad_cols + dc + cols]
+    return total
+
+
+def _scan_log_likelihood_strided(model: GridModel, ranges: FloatArray, angles: FloatArray,
+                                 step: int, compiled: bool = True) -> FloatArray:
+    """The scan's log likelihood at every ``step``-th heading, row and column: the
+    states (step k, step i, step j) of ``_scan_log_likelihood``, in its order of sums."""
+    offsets = _beam_endpoints(model, ranges, angles)[::step]
+    padded, pad_rows, pad_cols = _padded_field(model, offsets)
+    rows, cols = (-(-n // step) for n in model.free.shape)
+    shape = (offsets.shape[0], rows, cols)
+    kernels = compiled_kernels(int(np.prod(shape)), compiled)
+    if kernels is not None:
+        out = np.empty(shape)
+        kernels.scan_log_likelihood_strided(padded, pad_rows, pad_cols,
+                                            np.ascontiguousarray(offsets), step, rows, cols, out)
+        return out
+    total = np.zeros(shape)
+    for k in range(shape[0]):
+        layer = total[k]
+        for dr, dc in offsets[k]:
+            layer += padded[pad_rows + dr:pad_rows + dr + step * rows:step,
+                            pad_cols + dc:pad_cols + dc + step * cols:step]
     return total
 
 
@@ -571,9 +604,12 @@ def scan_weight(independent_beams: int, beams: int) -> float:
 
 
 def _correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angles: FloatArray,
-                  compiled: bool = True, weight: float = 1.0) -> tuple[FloatArray, float]:
+                  compiled: bool = True, weight: float = 1.0,
+                  box: tuple[int, int, int, int] | None = None) -> tuple[FloatArray, float]:
+    """``correct_scan`` of arguments already checked; with ``box``, ``belief`` is the
+    window's (grid/window.py), zero outside it."""
     def log_likelihood() -> FloatArray:
-        total = _scan_log_likelihood(model, ranges, angles, compiled)
+        total = _scan_log_likelihood(model, ranges, angles, compiled, box)
         if weight != 1.0:
             np.multiply(total, weight, out=total)
         return total
@@ -661,9 +697,22 @@ def pose_of(model: GridModel, state: tuple[int, int, int]) -> tuple[float, float
     return _pose_of(model, (k, i, j))
 
 
-def _pose_of(model: GridModel, state: tuple[int, int, int]) -> tuple[float, float, float]:
-    k, i, j = state
+def _centres(model: GridModel,
+             box: tuple[int, int, int, int] | None) -> tuple[FloatArray, FloatArray]:
+    """The cell centres of the map, or of the window ``box`` (grid/window.py) of it: the
+    map's own, so that a window's distances are the dense filter's to the last bit."""
     xs, ys = model.cell_centres()
+    if box is None:
+        return xs, ys
+    r0, r1, c0, c1 = box
+    return xs[c0:c1], ys[r0:r1]
+
+
+def _pose_of(model: GridModel, state: tuple[int, int, int],
+             box: tuple[int, int, int, int] | None = None) -> tuple[float, float, float]:
+    """With ``box``, ``state`` is of the window's belief."""
+    k, i, j = state
+    xs, ys = _centres(model, box)
     return float(xs[j]), float(ys[i]), float(_wrap_scalar(k * model.bin_width))
 
 
@@ -681,8 +730,9 @@ def covariance_around(belief: FloatArray, model: GridModel,
 
 
 def _covariance_around(belief: FloatArray, model: GridModel,
-                       pose: tuple[float, float, float]) -> FloatArray:
-    xs, ys = model.cell_centres()
+                       pose: tuple[float, float, float],
+                       box: tuple[int, int, int, int] | None = None) -> FloatArray:
+    xs, ys = _centres(model, box)
     px = belief.sum(axis=(0, 1))
     py = belief.sum(axis=(0, 2))
     pk = belief.sum(axis=(1, 2))
@@ -712,8 +762,9 @@ def mass_near(belief: FloatArray, model: GridModel, pose: tuple[float, float, fl
 
 
 def _mass_near(belief: FloatArray, model: GridModel, pose: tuple[float, float, float],
-               radius: float, angle: float) -> float:
-    xs, ys = model.cell_centres()
+               radius: float, angle: float,
+               box: tuple[int, int, int, int] | None = None) -> float:
+    xs, ys = _centres(model, box)
     dx, dy = xs[None, :] - pose[0], ys[:, None] - pose[1]
     if radius < 1e150:
         with np.errstate(over="ignore"):   # a pose that far is near no cell: inf > r^2

@@ -1,0 +1,202 @@
+"""The grid localizer on real buildings: time per update, memory and accuracy on real logs.
+
+    python bench/real_buildings.py [--log intel|aces|PATH ...] [--scans N]
+        [--resolution 0.1] [--heading-bins 72] [--belief-floor F ...] [--profile]
+
+For each CARMEN log (../shared/data/carmen, see its README) a map is made from
+the log's SLAM-corrected poses at 0.05 m (mapping with known poses,
+core/grid/mapping.py, as estimation_map does), and the localizer of
+core/grid/localization.py, with grid_localizer's defaults (60 beams, a scan
+after 0.25 m or 0.2 rad, kidnap_probability, laser_independent_beams), follows
+the log's raw odometry and corrects with its scans, the initial pose given
+(the first corrected pose, with a 0.3 m and 10 degree spread). No DDS: the
+figures are the core's, on one core (numba's kernels are single-threaded).
+
+Per log and belief_floor it prints the map's size, its states and free states,
+the time per update (prediction and correction; median, 90th percentile and
+the largest), the rate that makes, the peak resident memory of a process that
+ran only that configuration, and the accuracy against the corrected poses:
+the fraction of updates within 0.2 m and 5 degrees, and the median errors.
+belief_floor 0 is the exact filter over the whole grid; a floor > 0 drops the
+states of less probability after each correction, and the steps run over the
+bounding box of what is left (core/grid/localization.py says what is dropped).
+Each configuration runs in a fresh process, so the memory figures are its own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parent
+sys.path.insert(0, str(BENCH))
+sys.path.insert(1, str(BENCH.parent))
+
+from timing import table  # noqa: E402
+
+from estimation_nodes.core.grid import steps as grid  # noqa: E402
+from estimation_nodes.core.grid.likelihood_field import grid_model  # noqa: E402
+from estimation_nodes.core.grid.mapping import MappingModel, OccupancyGridMapper  # noqa: E402
+from estimation_nodes.params.grid import build_grid_localizer_settings  # noqa: E402
+from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults  # noqa: E402
+from estimation_nodes.tools.importers import carmen  # noqa: E402
+
+DATA = BENCH.parent.parent / "shared" / "data" / "carmen"
+LOGS = {"intel": DATA / "intel-corrected.log.gz", "aces": DATA / "aces-corrected.log.gz"}
+MAP_RESOLUTION = 0.05
+#: Readings at or beyond this are no return in both logs (their maxima: 81.83, 50.0 m).
+RANGE_MAX = 49.9
+NEAR_M, NEAR_RAD = 0.2, math.radians(5.0)
+PRIOR_SIGMA_M, PRIOR_SIGMA_RAD = 0.3, math.radians(10.0)
+
+
+def beam_angles(count: int) -> np.ndarray:
+    return -math.pi / 2 + math.pi * np.arange(count) / count
+
+
+def building_map(log: carmen.CarmenLog):
+    """The map a localizer is given: mapping with the log's corrected poses."""
+    mapper = OccupancyGridMapper(MappingModel(MAP_RESOLUTION))
+    for scan in log.scans:
+        mapper.add_scan(scan.pose, scan.ranges, beam_angles(scan.ranges.size), RANGE_MAX)
+    return mapper.occupancy()
+
+
+def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
+        belief_floor: float, profile: bool) -> dict:
+    log = carmen.read_log(log_path)
+    occupancy = building_map(log)
+    values = spec_defaults(GRID_LOCALIZER_SPECS)
+    values.update(resolution=resolution, heading_bins=heading_bins, max_states=200_000_000,
+                  laser_max_range=RANGE_MAX, belief_floor=belief_floor)
+    settings = build_grid_localizer_settings(values)
+    model = grid_model(occupancy, resolution, heading_bins, settings.sensor,
+                       settings.max_states)
+    localization = settings.localization(model)
+    first = log.scans[0].pose
+    localization.set_prior(first, np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2]))
+    grid.compiled_kernels(grid.COMPILED_MIN_STATES)
+    odometry = iter(log.odometry)
+    pending = next(odometry, None)
+    times, errors, headings = [], [], []
+    profiler = _profiler(profile)
+    for scan in log.scans[:scans]:
+        stamp = _ns(scan.t)
+        while pending is not None and _ns(pending.t) <= stamp:
+            localization.on_odometry(pending.pose, _ns(pending.t))
+            pending = next(odometry, None)
+        if not localization.due(stamp):
+            continue
+        ranges = scan.ranges
+        valid = np.flatnonzero(ranges < RANGE_MAX)
+        if valid.size > settings.max_beams:
+            valid = valid[np.linspace(0, valid.size - 1, settings.max_beams).round().astype(int)]
+        angles = beam_angles(ranges.size)
+        started = time.perf_counter()
+        if profiler:
+            profiler.enable()
+        localization.update(ranges[valid], angles[valid], stamp)
+        if profiler:
+            profiler.disable()
+        times.append(time.perf_counter() - started)
+        pose = localization.estimate(settings.quality_radius, settings.quality_angle).pose
+        errors.append(math.hypot(pose[0] - scan.pose[0], pose[1] - scan.pose[1]))
+        headings.append(abs(math.remainder(pose[2] - scan.pose[2], 2 * math.pi)))
+    if profiler:
+        _print_profile(profiler)
+    errors_a, headings_a = np.array(errors), np.array(headings)
+    return {"cells": list(model.free.shape), "states": int(np.prod(model.shape)),
+            "free_states": int(model.free.sum()) * heading_bins,
+            "updates": len(times), "times_ms": [1e3 * t for t in times],
+            "near": float(np.mean((errors_a <= NEAR_M) & (headings_a <= NEAR_RAD))),
+            "median_error_m": float(np.median(errors_a)),
+            "median_error_deg": math.degrees(float(np.median(headings_a))),
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def _ns(t: float) -> int:
+    return int(round(t * 1e9))
+
+
+def _profiler(profile: bool):
+    if not profile:
+        return None
+    import cProfile
+    return cProfile.Profile()
+
+
+def _print_profile(profiler) -> None:
+    import pstats
+    pstats.Stats(profiler, stream=sys.stderr).sort_stats("cumulative").print_stats(18)
+
+
+def resolve(name: str) -> Path:
+    return LOGS.get(name, Path(name))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--log", action="append", default=[],
+                        help="intel, aces or a CARMEN log's path (default: intel and aces)")
+    parser.add_argument("--scans", type=int, default=200, help="scans of each log played")
+    parser.add_argument("--resolution", type=float, default=0.1)
+    parser.add_argument("--heading-bins", type=int, default=72)
+    parser.add_argument("--belief-floor", type=float, action="append", default=[],
+                        help="the localizer's belief_floor (default: 0 and its default)")
+    parser.add_argument("--profile", action="store_true", help="cProfile of the updates")
+    parser.add_argument("--one", help=argparse.SUPPRESS)   # a child's run, as JSON
+    args = parser.parse_args()
+    if args.one:
+        log, floor = args.one.split(",")
+        print(json.dumps(run(resolve(log), args.scans, args.resolution, args.heading_bins,
+                             float(floor), args.profile)))
+        return
+    logs = args.log or ["intel", "aces"]
+    missing = [name for name in logs if not resolve(name).exists()]
+    if missing:
+        sys.exit(f"real_buildings: no log at {', '.join(str(resolve(n)) for n in missing)} "
+                 f"(see ../shared/data/README.md)")
+    floors = args.belief_floor or [0.0, spec_defaults(GRID_LOCALIZER_SPECS)["belief_floor"]]
+    rows = []
+    for name in logs:
+        for floor in floors:
+            result = _child(args, name, floor)
+            rows.append(_row(name, floor, result))
+            print(table(HEADER, rows[-1:]), flush=True) if len(rows) == 1 else None
+    print(table(HEADER, rows))
+
+
+HEADER = ["log", "belief_floor", "cells", "states", "free states", "updates",
+          "median ms", "p90 ms", "max ms", "Hz (median)", "peak RSS MB",
+          "within 0.2 m, 5 deg", "median error"]
+
+
+def _child(args: argparse.Namespace, name: str, floor: float) -> dict:
+    command = [sys.executable, __file__, "--one", f"{name},{floor!r}", "--scans",
+               str(args.scans), "--resolution", str(args.resolution), "--heading-bins",
+               str(args.heading_bins)] + (["--profile"] if args.profile else [])
+    done = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _row(name: str, floor: float, result: dict) -> list[str]:
+    times = np.array(result["times_ms"])
+    rows, cols = result["cells"]
+    return [Path(name).stem, f"{floor:g}", f"{cols} x {rows}", f"{result['states'] / 1e6:.2f} M",
+            f"{result['free_states'] / 1e6:.2f} M", str(result["updates"]),
+            f"{np.median(times):.1f}", f"{np.percentile(times, 90):.1f}", f"{times.max():.1f}",
+            f"{1e3 / np.median(times):.1f}", f"{result['peak_rss_mb']:.0f}",
+            f"{100 * result['near']:.1f} %",
+            f"{100 * result['median_error_m']:.1f} cm, {result['median_error_deg']:.1f} deg"]
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,153 @@
+"""The grid filter over its belief's support (core/grid/window.py) equals the dense filter."""
+
+import math
+
+import numpy as np
+import pytest
+
+from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid import window
+from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.params.grid import default_odometry_noise
+
+SECOND = 10**9
+RNG = np.random.default_rng(7)
+
+
+def room(rows, cols, bins=16, resolution=0.1):
+    """A room with walls and a few pillars, its field high near them."""
+    rng = np.random.default_rng(rows * 1000 + cols)
+    free = np.ones((rows, cols), dtype=bool)
+    free[[0, -1], :] = free[:, [0, -1]] = False
+    free[rng.integers(1, rows - 1, 12), rng.integers(1, cols - 1, 12)] = False
+    log_field = np.where(free, math.log(0.05), math.log(2.0)) + 0.1 * rng.random((rows, cols))
+    return grid.GridModel(free=free, log_field=log_field, log_outside=math.log(0.01),
+                          resolution=resolution, origin=(-1.0, 2.0), heading_bins=bins)
+
+
+def scan(count=12):
+    angles = np.linspace(-math.pi, math.pi, count, endpoint=False)
+    return 0.2 + RNG.random(count), angles
+
+
+def tracked_pair(model, floor, kidnap=0.0, compiled=True):
+    """A dense localizer and a windowed one (``floor``), the same tight prior."""
+    make = lambda f: GridLocalization(model, default_odometry_noise(), 0.0, 0.0, 10.0,  # noqa: E731
+                                      kidnap_probability=kidnap, belief_floor=f)
+    dense, windowed = make(0.0), make(floor)
+    for loc in (dense, windowed):
+        loc.set_prior((1.5, 4.0, 0.3), np.diag([0.01, 0.01, 0.01]))
+    return dense, windowed
+
+
+@pytest.mark.parametrize("rows, cols, small", [(40, 50, False), (120, 130, True)])
+def test_the_window_follows_the_dense_filter_to_rounding(rows, cols, small):
+    """A floor of 1e-30 drops only what is already ~0: every update equals the dense
+    one's."""
+    model = room(rows, cols)
+    dense, windowed = tracked_pair(model, floor=1e-30)
+    odometry = (0.0, 0.0, 0.0)
+    for step in range(8):
+        odometry = (odometry[0] + 0.12, odometry[1] + 0.03 * (step % 3), odometry[2] + 0.1)
+        ranges, angles = scan()
+        for loc in (dense, windowed):
+            loc.on_odometry(odometry, (step + 1) * SECOND)
+            loc.update(ranges, angles, (step + 1) * SECOND)
+        np.testing.assert_allclose(windowed.belief, dense.belief, rtol=0, atol=1e-12)
+        assert windowed.log_evidence == pytest.approx(dense.log_evidence, abs=1e-9)
+        a, b = dense.estimate(0.3, 0.2), windowed.estimate(0.3, 0.2)
+        assert a.pose == b.pose
+        np.testing.assert_allclose(b.covariance, a.covariance, rtol=1e-9, atol=1e-15)
+        assert b.quality == pytest.approx(a.quality, abs=1e-12)
+        np.testing.assert_array_equal(windowed.belief_map(), dense.belief_map())
+    r0, r1, c0, c1 = windowed._box
+    # In the small room (numpy's path) the tails above 1e-30 reach every wall; in the
+    # large one (compiled) the window stays small.
+    assert not small or (r1 - r0) * (c1 - c0) < 0.5 * rows * cols
+
+
+def test_a_floor_drops_at_most_floor_per_state_and_never_the_largest():
+    belief = RNG.random((4, 10, 10)) ** 8
+    belief /= belief.sum()
+    floor = 1e-4
+    kept, dropped = window.drop_below(belief.copy(), floor)
+    assert dropped <= floor * belief.size
+    assert dropped == pytest.approx(belief[belief < floor].sum())
+    assert kept.sum() == pytest.approx(1.0)
+    assert (kept[belief < floor] == 0).all() and (kept[belief >= floor] > 0).all()
+    certain = np.full((2, 3, 3), 1.0 / 18)
+    kept, dropped = window.drop_below(certain.copy(), 0.5)     # every state below it
+    np.testing.assert_array_equal(kept, certain)
+    assert dropped == 0.0
+
+
+def test_the_grown_box_holds_everything_the_prediction_reaches():
+    model = room(60, 70)
+    noise = default_odometry_noise()
+    for _ in range(20):
+        belief = np.zeros(model.shape)
+        r, c = RNG.integers(5, 50), RNG.integers(5, 60)
+        belief[RNG.integers(0, 16), r:r + 3, c:c + 4] = model.free[r:r + 3, c:c + 4]
+        if not belief.any():
+            continue
+        belief /= belief.sum()
+        delta = (RNG.uniform(-3, 3), RNG.uniform(0, 0.6), RNG.uniform(-3, 3))
+        try:
+            predicted = grid._predict(belief, model, delta, noise)
+        except grid.ZeroEvidenceError:
+            continue
+        r0, r1, c0, c1 = window.grown_box(window.support_box(belief), model, delta, noise)
+        outside = predicted.copy()
+        outside[:, r0:r1, c0:c1] = 0.0
+        assert not outside.any()
+
+
+def test_the_kidnap_lattice_correction_is_bayes_rule_over_the_mixed_prior():
+    """Floor 0 keeps every lattice state: the posterior equals the dense correction of
+    (1 - share) belief + share spread over the lattice's free states."""
+    model = room(30, 34)
+    belief = np.zeros(model.shape)
+    belief[:, 10:14, 12:15] = RNG.random((16, 4, 3)) * model.free[10:14, 12:15]
+    belief /= belief.sum()
+    box = (8, 16, 10, 18)
+    ranges, angles = scan()
+    share, weight = 0.01, 0.7
+    posterior, merged_box, log_evidence, left_out = window.correct_with_kidnap(
+        window.window_of(belief, box), model, box, ranges, angles, weight, share, floor=0.0)
+    lattice = np.zeros(model.shape)
+    lattice[::2, ::2, ::2] = model.free[::2, ::2]
+    prior = (1 - share) * belief + share * lattice / lattice.sum()
+    expected, expected_evidence = grid.correct(
+        prior, weight * grid.scan_log_likelihood(model, ranges, angles))
+    full = np.zeros(model.shape)
+    r0, r1, c0, c1 = merged_box
+    full[:, r0:r1, c0:c1] = posterior
+    np.testing.assert_allclose(full, expected, rtol=0, atol=1e-14)
+    assert log_evidence == pytest.approx(expected_evidence, abs=1e-12)
+    assert left_out == 0.0
+
+
+def test_a_kidnapped_robot_is_found_on_the_lattice():
+    """The belief sure of a wrong place; scans that only the true place explains."""
+    model = room(60, 60)
+    loc = GridLocalization(model, default_odometry_noise(), 0.0, 0.0, 10.0,
+                           kidnap_probability=1e-3, belief_floor=1e-9)
+    loc.set_prior((0.0, 3.5, 0.0), np.diag([1e-3, 1e-3, 1e-3]))
+    truth = (3.2 - 1.0, 2.0 + 4.2, 0.0)     # a lattice state's centre, far from the prior
+    xs, ys = model.cell_centres()
+    j, i = int(np.argmin(abs(xs - truth[0]))), int(np.argmin(abs(ys - truth[1])))
+    field = np.full(model.free.shape, math.log(0.01))
+    field[i, j + 5] = math.log(50.0)        # only from the truth does a beam end here
+    model = grid.GridModel(model.free, field, math.log(0.01), model.resolution,
+                           model.origin, model.heading_bins)
+    loc.model = model
+    ranges, angles = np.array([0.5]), np.array([0.0])
+    loc.on_odometry((0.0, 0.0, 0.0), SECOND)
+    for step in range(3):
+        loc.on_odometry((0.0, 0.0, 0.0), (step + 1) * SECOND)
+        loc.update(ranges, angles, (step + 1) * SECOND)
+    # Found: a pose from which the beam ends in the marked cell (every heading has one).
+    pose = loc.estimate(0.3, 0.2).pose
+    end = (pose[0] + 0.5 * math.cos(pose[2]), pose[1] + 0.5 * math.sin(pose[2]))
+    assert math.hypot(end[0] - xs[j + 5], end[1] - ys[i]) < 0.1
+    assert math.hypot(pose[0] - 0.0, pose[1] - 3.5) > 1.0
