@@ -151,3 +151,15 @@ def test_a_kidnapped_robot_is_found_on_the_lattice():
     end = (pose[0] + 0.5 * math.cos(pose[2]), pose[1] + 0.5 * math.sin(pose[2]))
     assert math.hypot(end[0] - xs[j + 5], end[1] - ys[i]) < 0.1
     assert math.hypot(pose[0] - 0.0, pose[1] - 3.5) > 1.0
+
+
+def test_the_compiled_lattice_scan_equals_numpys_and_the_dense_scan_on_the_lattice():
+    model = room(260, 250)     # a lattice of 8 x 130 x 125 states: the compiled path
+    assert grid.compiled_kernels(8 * 130 * 125) is not None
+    ranges, angles = scan(20)
+    compiled = grid._scan_log_likelihood_strided(model, ranges, angles, 2, compiled=True)
+    numpy_s = grid._scan_log_likelihood_strided(model, ranges, angles, 2, compiled=False)
+    dense = grid._scan_log_likelihood(model, ranges, angles)
+    np.testing.assert_allclose(compiled, numpy_s, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(compiled, dense[::2, ::2, ::2] * model.free[::2, ::2],
+                               rtol=0, atol=1e-12)

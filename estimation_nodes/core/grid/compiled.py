@@ -159,22 +159,24 @@ def scan_log_likelihood(padded: FloatArray, pad_rows: int, pad_cols: int, offset
 
 @_jit
 def scan_log_likelihood_strided(padded: FloatArray, pad_rows: int, pad_cols: int,
-                                offsets: np.ndarray, step: int, rows: int, cols: int,
-                                out: FloatArray) -> None:
-    """out[k, i, j] = sum_b padded[pad_rows + step i + dr[k, b], pad_cols + step j + dc[k, b]]:
-    ``scan_log_likelihood`` at every ``step``-th row and column (the offsets given are
-    those of the headings wanted). Unchecked, as that one."""
+                                offsets: np.ndarray, step: int, row_starts: np.ndarray,
+                                columns: np.ndarray, out: FloatArray) -> None:
+    """out[k, i, j] = sum_b padded[pad_rows + step i + dr[k, b], pad_cols + step j + dc[k, b]]
+    for the columns j of row i listed in columns[row_starts[i]:row_starts[i + 1]] (the
+    free ones), 0 elsewhere: ``scan_log_likelihood`` at every ``step``-th row and column
+    (the offsets given are those of the headings wanted). Unchecked, as that one."""
     bins, beams = offsets.shape[0], offsets.shape[1]
+    rows = out.shape[1]
+    out[:] = 0.0
     for k in range(bins):
         for i in range(rows):
             target = out[k, i]
-            target[:] = 0.0
+            listed = columns[row_starts[i]:row_starts[i + 1]]
             for b in range(beams):
+                row = padded[pad_rows + step * i + offsets[k, b, 0]]
                 start = pad_cols + offsets[k, b, 1]
-                segment = padded[pad_rows + step * i + offsets[k, b, 0],
-                                 start:start + step * cols:step]
-                for j in range(cols):
-                    target[j] += segment[j]
+                for j in listed:
+                    target[j] += row[start + step * j]
 
 
 def warm_up() -> None:
@@ -188,4 +190,5 @@ def warm_up() -> None:
     blur_cols_masked(belief, taps, np.ones((3, 3), dtype=np.bool_), out)
     offsets = np.zeros((2, 1, 2), dtype=np.int64)
     scan_log_likelihood(np.zeros((5, 5)), 1, 1, offsets, 2, 3, 3, out)
-    scan_log_likelihood_strided(np.zeros((5, 5)), 1, 1, offsets, 2, 2, 2, out[:, :2, :2].copy())
+    scan_log_likelihood_strided(np.zeros((5, 5)), 1, 1, offsets, 2, np.array([0, 1, 2]),
+                                np.array([0, 1]), out[:, :2, :2].copy())

@@ -544,23 +544,28 @@ def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArra
 def _scan_log_likelihood_strided(model: GridModel, ranges: FloatArray, angles: FloatArray,
                                  step: int, compiled: bool = True) -> FloatArray:
     """The scan's log likelihood at every ``step``-th heading, row and column: the
-    states (step k, step i, step j) of ``_scan_log_likelihood``, in its order of sums."""
-    offsets = _beam_endpoints(model, ranges, angles)[::step]
+    states (step k, step i, step j) of ``_scan_log_likelihood``, in its order of sums;
+    0 at the lattice's cells that are not free (only free states are scored)."""
+    offsets = np.ascontiguousarray(_beam_endpoints(model, ranges, angles)[::step])
     padded, pad_rows, pad_cols = _padded_field(model, offsets)
-    rows, cols = (-(-n // step) for n in model.free.shape)
-    shape = (offsets.shape[0], rows, cols)
+    lattice_free = model.free[::step, ::step]
+    shape = (offsets.shape[0], *lattice_free.shape)
     kernels = compiled_kernels(int(np.prod(shape)), compiled)
     if kernels is not None:
         out = np.empty(shape)
-        kernels.scan_log_likelihood_strided(padded, pad_rows, pad_cols,
-                                            np.ascontiguousarray(offsets), step, rows, cols, out)
+        rows, columns = np.nonzero(lattice_free)
+        row_starts = np.searchsorted(rows, np.arange(shape[1] + 1))
+        kernels.scan_log_likelihood_strided(padded, pad_rows, pad_cols, offsets, step,
+                                            row_starts, columns, out)
         return out
     total = np.zeros(shape)
+    rows, cols = shape[1:]
     for k in range(shape[0]):
         layer = total[k]
         for dr, dc in offsets[k]:
             layer += padded[pad_rows + dr:pad_rows + dr + step * rows:step,
                             pad_cols + dc:pad_cols + dc + step * cols:step]
+    total *= lattice_free
     return total
 
 
