@@ -80,10 +80,12 @@ class MapRun:
 
 
 def run(case: MapRun, seed: int, seconds: float, kidnap: bool,
-        independent_beams: int | None = None) -> dict:
+        independent_beams: int | None = None, belief_floor: float | None = None) -> dict:
     values = spec_defaults(GRID_LOCALIZER_SPECS)
     values.update(map_file=str(case.path), laser_max_range=case.laser_range,
                   resolution=case.resolution, heading_bins=case.heading_bins)
+    if belief_floor is not None:
+        values.update(belief_floor=belief_floor)
     if independent_beams is not None:
         values.update(laser_independent_beams=independent_beams)
     settings = build_grid_localizer_settings(values)
@@ -172,6 +174,8 @@ def main() -> None:
     parser.add_argument("--laser-range", type=float, default=12.0, help="for --map, --building")
     parser.add_argument("--resolution", type=float, default=0.1, help="for --map, --building")
     parser.add_argument("--heading-bins", type=int, default=72, help="for --map, --building")
+    parser.add_argument("--belief-floor", type=float, default=None,
+                        help="the localizer's belief_floor instead of its default")
     parser.add_argument("--runs", default="global,kidnap",
                         help="global, kidnap or both (comma-separated)")
     parser.add_argument("--independent-beams", type=int, action="append", default=[],
@@ -187,7 +191,8 @@ def main() -> None:
         for case, kidnap, beams in itertools.product(map_runs(args, Path(scratch)), kinds,
                                                       args.independent_beams or [None]):
             started = time.perf_counter()
-            results = [run(case, seed, args.seconds, kidnap, beams) for seed in seeds]
+            results = [run(case, seed, args.seconds, kidnap, beams, args.belief_floor)
+                       for seed in seeds]
             found = sum(r["found"] for r in results)
             first = np.median([r["first"] for r in results])
             last = np.median([r["last"] for r in results])
