@@ -163,3 +163,27 @@ def test_the_compiled_lattice_scan_equals_numpys_and_the_dense_scan_on_the_latti
     np.testing.assert_allclose(compiled, numpy_s, rtol=0, atol=1e-12)
     np.testing.assert_allclose(compiled, dense[::2, ::2, ::2] * model.free[::2, ::2],
                                rtol=0, atol=1e-12)
+
+
+def test_the_windowed_steps_need_no_kernel_beyond_those_compiled_at_load():
+    """A kernel compiled mid-run (a new argument layout) is where a Ctrl-C ends in a
+    traceback (core/compiled_loader.py): the windowed update and its kidnap lattice use
+    exactly the versions warm_up compiled."""
+    kernels = grid.compiled_kernels(grid.COMPILED_MIN_STATES)
+    model = room(300, 300, bins=32)
+    loc = GridLocalization(model, default_odometry_noise(), 0.0, 0.0, 10.0,
+                           kidnap_probability=1e-12, belief_floor=1e-9)
+    loc.set_prior((12.0, 16.0, 0.3), np.diag([0.6, 0.6, 0.05]))
+    compiled = {name: len(getattr(kernels, name).signatures) for name in
+                ("shift_motion", "blur_headings", "blur_rows", "blur_cols_masked",
+                 "scan_log_likelihood", "scan_log_likelihood_strided")}
+    ranges, angles = scan(30)
+    for step in range(4):
+        loc.on_odometry((0.1 * step, 0.0, 0.05 * step), (step + 1) * SECOND)
+        loc.update(ranges, angles, (step + 1) * SECOND)
+    # The window's compiled path ran: more states than COMPILED_MIN_STATES, not all.
+    assert grid.COMPILED_MIN_STATES < loc.window_states < model.free.size * 32 / 2
+    assert {name: len(getattr(kernels, name).signatures) for name in compiled} == compiled
+    # Whatever ran before in this process: no version for a strided ('A') array.
+    assert not [sig for name in compiled for sig in getattr(kernels, name).signatures
+                if "'A'" in str(sig)]

@@ -555,8 +555,9 @@ def _scan_log_likelihood_strided(model: GridModel, ranges: FloatArray, angles: F
         out = np.empty(shape)
         rows, columns = np.nonzero(lattice_free)
         row_starts = np.searchsorted(rows, np.arange(shape[1] + 1))
+        # nonzero's arrays are strided views: contiguous ones are what warm_up compiled for.
         kernels.scan_log_likelihood_strided(padded, pad_rows, pad_cols, offsets, step,
-                                            row_starts, columns, out)
+                                            row_starts, np.ascontiguousarray(columns), out)
         return out
     total = np.zeros(shape)
     rows, cols = shape[1:]

@@ -75,7 +75,11 @@ def crop(model: grid.GridModel, box: Box) -> grid.GridModel:
     """The map within ``box``: its free cells and field, its origin at the box's corner."""
     r0, r1, c0, c1 = box
     origin = (model.origin[0] + c0 * model.resolution, model.origin[1] + r0 * model.resolution)
-    return grid.GridModel(model.free[r0:r1, c0:c1], model.log_field[r0:r1, c0:c1],
+    # Contiguous copies: the compiled kernels were compiled for those (warm_up), and a view
+    # would make numba compile another version mid-run, where a Ctrl-C cannot stop it
+    # cleanly (core/compiled_loader.py).
+    return grid.GridModel(np.ascontiguousarray(model.free[r0:r1, c0:c1]),
+                          np.ascontiguousarray(model.log_field[r0:r1, c0:c1]),
                           model.log_outside, model.resolution, origin, model.heading_bins)
 
 
