@@ -127,14 +127,16 @@ def correct_with_kidnap(belief: FloatArray, model: grid.GridModel, box: Box,
         share, lattice_ll = 0.0, None
     else:
         lattice_ll = grid._scan_log_likelihood_strided(model, ranges, angles, step, compiled)
-    peak = _peak(window_ll, belief > 0, lattice_ll, lattice_free, weight)
-    weighted = _scaled_exp(window_ll, weight, peak)
-    weighted *= belief
+    if weight != 1.0:
+        np.multiply(window_ll, weight, out=window_ll)
+        if lattice_ll is not None:
+            np.multiply(lattice_ll, weight, out=lattice_ll)
+    peak = _peak(window_ll, belief > 0, lattice_ll, lattice_free)
+    weighted, _ = grid._weighted(window_ll, peak, belief)
     weighted *= 1.0 - share
     total = float(weighted.sum())
     if lattice_ll is not None:
-        lattice = _scaled_exp(lattice_ll, weight, peak)
-        lattice *= lattice_free
+        lattice, _ = grid._weighted(lattice_ll, peak, lattice_free)
         lattice *= share / free_states
         total += float(lattice.sum())
     if not total > 0.0:
@@ -149,23 +151,15 @@ def correct_with_kidnap(belief: FloatArray, model: grid.GridModel, box: Box,
 
 
 def _peak(window_ll: FloatArray, possible: np.ndarray, lattice_ll: FloatArray | None,
-          lattice_free: np.ndarray, weight: float) -> float:
-    """The largest weighted log likelihood among the states the prior allows, so that
-    the most likely of them never underflows."""
+          lattice_free: np.ndarray) -> float:
+    """The largest log likelihood among the states the prior allows, so that the most
+    likely of them never underflows."""
     peak = float(window_ll[possible].max(initial=-math.inf))
     if lattice_ll is not None:
         peak = max(peak, float(lattice_ll[:, lattice_free].max(initial=-math.inf)))
     if not math.isfinite(peak):
         raise grid.ZeroEvidenceError("every state with probability rules the scan out")
-    return weight * peak
-
-
-def _scaled_exp(log_likelihood: FloatArray, weight: float, peak: float) -> FloatArray:
-    """exp(weight x log_likelihood - peak), written over log_likelihood."""
-    if weight != 1.0:
-        np.multiply(log_likelihood, weight, out=log_likelihood)
-    np.subtract(log_likelihood, peak, out=log_likelihood)
-    return np.exp(log_likelihood, out=log_likelihood)
+    return peak
 
 
 def _merged(weighted: FloatArray, box: Box, lattice: FloatArray,
