@@ -66,7 +66,29 @@ def run_main(module: str, interrupted_code: int) -> None:
         sys.exit(interrupted_code)
     # From here on the program's own handling: KeyboardInterrupt, then rclpy's handler.
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    main()
+    try:
+        main()
+    except (Exception, KeyboardInterrupt) as error:
+        # A Ctrl-C that the program's own handling missed: one that landed in a module
+        # imported late, which a C extension's loader turned into another error (rpyutils:
+        # ImportError "initialization failed", from KeyboardInterrupt).
+        if not caused_by_interrupt(error):
+            raise
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        sys.exit(interrupted_code)
+
+
+def caused_by_interrupt(error: BaseException) -> bool:
+    """Whether ``error`` is a KeyboardInterrupt or was raised while handling one (its
+    ``__cause__`` or ``__context__`` chain holds one)."""
+    seen: set[int] = set()
+    link: BaseException | None = error
+    while link is not None and id(link) not in seen:
+        if isinstance(link, KeyboardInterrupt):
+            return True
+        seen.add(id(link))
+        link = link.__cause__ or link.__context__
+    return False
 
 
 def estimator() -> None:

@@ -188,6 +188,31 @@ def shortened(kind: str, tmp_path: Path) -> Path:
     return path
 
 
+def wait_for_moment(watched: Watched, moment: str, first_moment: float, name: str,
+                    ready: str, watcher, executor, limit: float = 60.0) -> None:
+    """Wait (``limit`` s at most) for one of a program's moments: still ``loading``,
+    ``in_the_graph`` (its node ``name`` seen by ``watcher``; from the start of its
+    constructor on, parameters, map and kernels still being made), or ``running`` (it
+    printed ``ready``)."""
+    if moment == "loading":
+        watched.wait_for(lambda: time.monotonic() - watched.started >= first_moment, "start",
+                         limit)
+    elif moment == "in_the_graph":
+        watched.wait_for(lambda: name in watcher.node.get_node_names(), "node in the graph",
+                         limit, spin=lambda: spin_until(executor, lambda: False, 0.02))
+    else:
+        watched.wait_for(lambda: watched.printed(ready), f"{ready!r} line", limit)
+
+
+def ended_quietly(watched: Watched, output: str, moment: str, code: int) -> str:
+    """Assert that the program ended with ``code`` and printed no traceback; what to say
+    of the run where a later assertion fails."""
+    where = f"SIGINT {watched.interrupted_at:.2f} s after start ({moment}):\n{output}"
+    assert "Traceback" not in output and "Fatal Python error" not in output, where
+    assert watched.process.returncode == code, where
+    return where
+
+
 @pytest.mark.timeout(150)
 @pytest.mark.parametrize("moment", DEMO_MOMENTS)
 @pytest.mark.parametrize("kind", KINDS)
@@ -218,9 +243,7 @@ def test_ctrl_c_of_the_demo_exits_130_quietly_leaving_nothing(ros_env, tmp_path,
     finally:
         if demo.process.poll() is None:
             demo.finish(timeout=0)
-    where = f"SIGINT {demo.interrupted_at:.2f} s after start ({moment}):\n{output}"
-    assert "Traceback" not in output and "Fatal Python error" not in output, where
-    assert demo.process.returncode == 130, where
+    where = ended_quietly(demo, output, moment, 130)
     assert not left, f"left running: {left}; {where}"
 
 
@@ -234,24 +257,47 @@ def test_ctrl_c_of_a_node_alone_exits_0_quietly(ros_env, executor, collector_fac
     node = Watched([executable(name), "--ros-args", "--params-file", str(SCENARIOS / params)],
                    ros_env)
     try:
-        limit = 60.0
-        if moment == "loading":
-            node.wait_for(lambda: time.monotonic() - node.started >= first_moment, "start",
-                          limit)
-        elif moment == "in_the_graph":
-            # Its name is in the graph from the start of its constructor on: parameters,
-            # map and kernels are still being made.
-            node.wait_for(lambda: name in watcher.node.get_node_names(), "node in the graph",
-                          limit, spin=lambda: spin_until(executor, lambda: False, 0.02))
-        else:
-            node.wait_for(lambda: node.printed(ready), f"{ready!r} line", limit)
+        wait_for_moment(node, moment, first_moment, name, ready, watcher, executor)
         node.interrupt()
         output = node.finish()
         left = node.left_behind()
     finally:
         if node.process.poll() is None:
             node.finish(timeout=0)
-    where = f"SIGINT {node.interrupted_at:.2f} s after start ({moment}):\n{output}"
-    assert "Traceback" not in output and "Fatal Python error" not in output, where
-    assert node.process.returncode == 0, where
+    where = ended_quietly(node, output, moment, 0)
     assert not left, f"left running: {left}; {where}"
+
+
+PLAY_MOMENTS = ("loading", "in_the_graph", "playing")
+
+
+@pytest.fixture
+def slow_recording(tmp_path) -> Path:
+    """A recording of a few seconds, to be played at a tenth of its rate: it is still
+    playing when the signal comes."""
+    from estimation_nodes.tools.importers import cli
+    from tests.unit.test_importers import corrected_log
+
+    log = tmp_path / "run.log"
+    log.write_text(corrected_log())
+    out = tmp_path / "run.mcap"
+    cli.main(["carmen", str(log), "-o", str(out)])
+    return out
+
+
+@pytest.mark.timeout(90)
+@pytest.mark.parametrize("moment", PLAY_MOMENTS)
+def test_ctrl_c_of_a_play_exits_130_quietly(ros_env, executor, collector_factory,
+                                            first_moment, slow_recording, moment):
+    watcher = collector_factory({}, name="watcher") if moment == "in_the_graph" else None
+    play = Watched([executable("estimation_play"), str(slow_recording), "--rate", "0.1"],
+                   ros_env)
+    try:
+        wait_for_moment(play, moment.replace("playing", "running"), first_moment,
+                        "estimation_play", "messages on", watcher, executor)
+        play.interrupt()
+        output = play.finish()
+    finally:
+        if play.process.poll() is None:
+            play.finish(timeout=0)
+    ended_quietly(play, output, moment, 130)

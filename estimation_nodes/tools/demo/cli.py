@@ -315,26 +315,29 @@ def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecor
 
 
 def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunRecord]:
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
-
-    from estimation_nodes.nodes.estimator import Estimator
-    from estimation_nodes.nodes.linear_system import LinearSystem
-    from estimation_nodes.nodes.motion_commander import MotionCommander
-    from estimation_nodes.nodes.parameters import ConfigurationError
-    from estimation_nodes.nodes.tile_sensor import TileSensor
-
     ros_args = ["--ros-args", "--params-file", str(params),
                 *commander_overrides(args.settle, exit_when_done=False)]
     executor = None
     nodes = []
     sinks: list = []
     code = 0
-    # A Ctrl-C is noted and acted on between spins, as run_graph (graph_runtime.py) does.
+    # A Ctrl-C is noted and acted on between spins, as run_graph (graph_runtime.py) does;
+    # rclpy and the nodes are imported under the hold for the reason given there.
     held = HeldInterrupts()
     with held:
+        import rclpy
+        from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
+        from estimation_nodes.nodes.estimator import Estimator
+        from estimation_nodes.nodes.linear_system import LinearSystem
+        from estimation_nodes.nodes.motion_commander import MotionCommander
+        from estimation_nodes.nodes.parameters import ConfigurationError
+        from estimation_nodes.nodes.tile_sensor import TileSensor
+
         try:
+            if held.noted:
+                raise KeyboardInterrupt
             # Without rclpy's signal handler, as run_graph says why.
             rclpy.init(args=["estimation_demo", *ros_args],
                        signal_handler_options=SignalHandlerOptions.NO)

@@ -116,10 +116,6 @@ def run_graph(params: Path, make_monitor: Callable[[], Any], starts: Sequence[No
     every 20 ms. rclpy's own signal handler is left out: it would shut the context down
     under the run.
     """
-    import rclpy
-    from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
-
     processes: dict[str, subprocess.Popen] = {}
     executor = monitor = None
     code = 0
@@ -130,7 +126,14 @@ def run_graph(params: Path, make_monitor: Callable[[], Any], starts: Sequence[No
             raise KeyboardInterrupt
 
     with held:
+        # Imported here, under the hold: rclpy's C extension loader turned a Ctrl-C in
+        # the middle of its import into ImportError "initialization failed".
+        import rclpy
+        from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+
         try:
+            check_interrupt()
             rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
             executor = SingleThreadedExecutor()
             monitor = make_monitor()

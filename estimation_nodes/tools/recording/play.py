@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import signal
 import sys
 import time
 from collections.abc import Sequence
@@ -204,13 +205,14 @@ def _run(args: argparse.Namespace, messages: list[Recorded]) -> int:
 
     from estimation_nodes.tools.demo.graph_runtime import spin_until
 
-    # Ctrl-C raises KeyboardInterrupt here instead of shutting the context down under us.
-    rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
-    node = Node("estimation_play")
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
+    node = executor = None
     code = 0
     try:
+        # Ctrl-C raises KeyboardInterrupt here instead of shutting the context down under us.
+        rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
+        node = Node("estimation_play")
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
         player = Player(node, messages, args.clock)
         if args.wait_for_subscribers:
             if not spin_until(executor, lambda: not player.unmatched(),
@@ -228,11 +230,14 @@ def _run(args: argparse.Namespace, messages: list[Recorded]) -> int:
             print(f"estimation_play: not every message was acknowledged on "
                   f"{', '.join(unacknowledged)} within {ACK_TIMEOUT_S:g} s", file=sys.stderr)
     except KeyboardInterrupt:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)   # the end has begun
         print("estimation_play: interrupted", file=sys.stderr)
         code = 130
     finally:
-        node.destroy_node()
-        executor.shutdown()
+        if node is not None:
+            node.destroy_node()
+        if executor is not None:
+            executor.shutdown()
         rclpy.try_shutdown()
     return code
 
