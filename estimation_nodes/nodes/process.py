@@ -9,9 +9,11 @@ import sys
 from collections.abc import Callable, Sequence
 
 import rclpy
-from rclpy.executors import ExternalShutdownException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
+from estimation_nodes.nodes.interrupts import HeldInterrupts
 from estimation_nodes.nodes.parameters import ConfigurationError
 from estimation_nodes.nodes.rclpy_internals import RCLError
 from estimation_nodes.params.param_files import check_params_file, params_files_in
@@ -29,9 +31,11 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None,
     argv = list(sys.argv if args is None else args)
     node = None
     code = 0
-    # A Ctrl-C is an end in every phase: before rclpy.init() Python raises KeyboardInterrupt;
-    # after it, rclpy's handler shuts the context down and the spin raises
-    # ExternalShutdownException.
+    # A Ctrl-C is an end in every phase: until the node is made Python raises
+    # KeyboardInterrupt; from the spin on it is noted and ends the spin at its next turn
+    # (spin_until_interrupted). rclpy's own handler is left out: it raised KeyboardInterrupt
+    # anywhere in rclpy, in an executor's constructor too, whose finalizer then printed
+    # a traceback.
     try:
         if not end_with_parent():
             return 0
@@ -40,13 +44,13 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None,
         try:
             for path in params_files_in(argv):
                 check_params_file(path)
-            rclpy.init(args=argv)
+            rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
         except (ValueError, RCLError) as error:
             print(f"[FATAL] [{name}]: cannot start: {str(error).split(', at ')[0]}",
                   file=sys.stderr)
             return 2
         node = node_class()
-        rclpy.spin(node)
+        spin_until_interrupted(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except RCLError:
@@ -65,6 +69,24 @@ def run(node_class: Callable[..., Node], args: Sequence[str] | None = None,
             node.destroy_node()
         rclpy.try_shutdown()
     return code
+
+
+#: How long a spin waits for work before it looks whether a Ctrl-C came (s): the most a
+#: Ctrl-C of an idle node waits.
+SPIN_TURN_S = 0.1
+
+
+def spin_until_interrupted(node: Node) -> None:
+    """Spin ``node`` until a Ctrl-C or the context's shutdown; a callback's SystemExit or
+    error comes out as it was raised."""
+    with HeldInterrupts(restore=False) as held:
+        executor = SingleThreadedExecutor(context=node.context)
+        try:
+            executor.add_node(node)
+            while not held.noted and executor.context.ok():
+                executor.spin_once(timeout_sec=SPIN_TURN_S)
+        finally:
+            executor.shutdown(timeout_sec=0)
 
 
 def ignore_further_interrupts() -> None:

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from estimation_nodes.nodes.interrupts import HeldInterrupts
+
 #: The exit code of a run ended by Ctrl-C: the shell's for an end by SIGINT.
 INTERRUPTED = 130
 
@@ -68,28 +70,6 @@ def stop_children(processes: Iterable[subprocess.Popen]) -> None:
     """End the children started with ``start_node``, the last started first."""
     for process in reversed(list(processes)):
         stop_process(process)
-
-
-class HeldInterrupts:
-    """While the block runs, a Ctrl-C (SIGINT) is noted instead of raised, so that what the
-    block does is done whole: a child started is a child known, a stop is a stop of all.
-
-    ``noted`` says whether one came; the handler in place before comes back at the end.
-    """
-
-    def __init__(self) -> None:
-        self.noted = False
-        self._previous: Any = None
-
-    def __enter__(self) -> HeldInterrupts:
-        self._previous = signal.signal(signal.SIGINT, self._note)
-        return self
-
-    def _note(self, _signum: int, _frame: Any) -> None:
-        self.noted = True
-
-    def __exit__(self, *_exc: object) -> None:
-        signal.signal(signal.SIGINT, self._previous)
 
 
 @dataclass(frozen=True)
