@@ -16,6 +16,10 @@ Each published pose carries the stamp of what made it: its scan's time, the
 initial pose's, or the time of a start or reset (uniform belief). So a
 replay of a recorded run (tools/replay/grid_localizer.py) takes exactly the
 scans this node took, whichever it left out.
+
+Only the newest scan is kept while an update runs: an update that takes longer than the
+laser's period answers the latest scan next, and ``/diagnostics`` says so (WARN, with
+``scans_missed`` counted from the scans' stamps: nodes/scan_gaps.py).
 """
 
 from __future__ import annotations
@@ -30,7 +34,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.node import Node
-from rclpy.qos import qos_profile_sensor_data
 from rclpy.time import Time
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Float64
@@ -51,7 +54,8 @@ from estimation_nodes.nodes.grid_messages import (
 )
 from estimation_nodes.nodes.parameters import declare_and_build
 from estimation_nodes.nodes.process import main_for
-from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.nodes.qos import NEWEST_SCAN_QOS, latched_qos
+from estimation_nodes.nodes.scan_gaps import ScanGaps
 from estimation_nodes.nodes.stamps import stamp_or_none
 from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
@@ -92,9 +96,10 @@ class GridLocalizer(Node):
             self._start(self._settings.model)
         else:
             self.create_subscription(OccupancyGrid, topics.MAP, self._on_map, latched_qos(1))
-        # Best effort takes both best-effort and reliable publishers; a scan is only worth
-        # its latest, while odometry is followed in order.
-        self.create_subscription(LaserScan, topics.SCAN, self._on_scan, qos_profile_sensor_data)
+        # A scan is only worth its latest, while odometry is followed in order.
+        self.create_subscription(LaserScan, topics.SCAN, self._on_scan, NEWEST_SCAN_QOS)
+        self.scan_gaps = ScanGaps()
+        self._missed_reported = 0
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, ODOM_DEPTH)
         self.create_subscription(PoseWithCovarianceStamped, topics.INITIAL_POSE,
                                  self._on_initial_pose, 10)
@@ -158,6 +163,7 @@ class GridLocalizer(Node):
                          f"angle_min {msg.angle_min}")
             return
         stamp = stamp_or_none(msg.header.stamp)
+        self.scan_gaps.note(stamp, msg.scan_time)
         if stamp is not None and not self.localization.odometry_covers(stamp):
             # The odometry of the scan's time is still on its way (another topic): wait for
             # it, so the update does not depend on which came first.
@@ -266,9 +272,15 @@ class GridLocalizer(Node):
                 values["last_log_evidence"] = f"{self.localization.log_evidence:.4f}"
             if math.isfinite(self.last_update_s):
                 values["last_update_ms"] = f"{self.last_update_s * 1e3:.1f}"
+        values["scans_missed"] = self.scan_gaps.missed
         values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
         values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
         problems = ["messages rejected"] if self.rejected else []
+        missed_now = self.scan_gaps.missed - self._missed_reported
+        self._missed_reported = self.scan_gaps.missed
+        if missed_now:
+            problems.append(f"falling behind the laser: {missed_now} scans missed since the "
+                            f"last report")
         self._diagnostics_pub.publish(status_array(self, "grid localization", values,
                                                    problems))
 
