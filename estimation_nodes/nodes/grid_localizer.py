@@ -19,14 +19,15 @@ scans this node took, whichever it left out.
 
 Only the newest scan is kept while an update runs: an update that takes longer than the
 laser's period answers the latest scan next, and ``/diagnostics`` says so (WARN, with
-``scans_missed`` counted from the scans' stamps: nodes/scan_gaps.py).
+``scans_missed`` counted from the scans' stamps and scan_time, nodes/scan_gaps.py, and
+``busy_percent``, the share of the time spent updating).
 """
 
 from __future__ import annotations
 
 import math
 import time
-from collections import Counter
+from collections import Counter, deque
 from typing import Any
 
 import numpy as np
@@ -70,6 +71,12 @@ SCAN_WAIT_S = 0.2
 #: Odometry messages queued for the localizer: 20 s at 10 Hz, 4 s at 50 Hz, so an update
 #: that keeps it busy loses none (a lost one would move the next update's prediction).
 ODOM_DEPTH = ODOMETRY_HISTORY
+#: Updates whose durations /diagnostics summarizes (the latest ones).
+UPDATE_TIMES_KEPT = 1000
+#: Updating this share of the time or more is falling behind the laser: a scan that comes
+#: during an update waits, and one after it replaces it (WARN in /diagnostics). Counted
+#: directly where the scans carry their period (scan_time): scans_missed.
+BUSY_WARNING = 0.9
 
 
 class GridLocalizer(Node):
@@ -86,6 +93,8 @@ class GridLocalizer(Node):
         self._warnings = ThrottledWarnings(self.get_logger())
         self.localization: GridLocalization | None = None
         self.last_update_s = float("nan")
+        #: The durations (s) of the latest updates, for /diagnostics' median and maximum.
+        self.update_times: deque[float] = deque(maxlen=UPDATE_TIMES_KEPT)
         latched = latched_qos(self._settings.history_depth)
         self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, topics.POSE, latched)
         self._belief_pub = self.create_publisher(OccupancyGrid, topics.BELIEF_MAP, latched)
@@ -100,6 +109,9 @@ class GridLocalizer(Node):
         self.create_subscription(LaserScan, topics.SCAN, self._on_scan, NEWEST_SCAN_QOS)
         self.scan_gaps = ScanGaps()
         self._missed_reported = 0
+        #: Time spent updating since the last /diagnostics, and when that was (monotonic s).
+        self._busy_s = 0.0
+        self._reported_at = time.monotonic()
         self.create_subscription(Odometry, topics.ODOM, self._on_odom, ODOM_DEPTH)
         self.create_subscription(PoseWithCovarianceStamped, topics.INITIAL_POSE,
                                  self._on_initial_pose, 10)
@@ -192,6 +204,8 @@ class GridLocalizer(Node):
             self._reject("bad_scan", f"scan dropped: {error}")
             return
         self.last_update_s = time.perf_counter() - started
+        self.update_times.append(self.last_update_s)
+        self._busy_s += self.last_update_s
         self.handled["scan"] += 1
         self._publish(Time.from_msg(msg.header.stamp))
 
@@ -249,6 +263,13 @@ class GridLocalizer(Node):
                                                 model.resolution, model.origin,
                                                 self._settings.frame_id, stamp_msg))
 
+    def _busy_since_last_report(self) -> float:
+        """The share of the time since the last report spent in updates (0..1)."""
+        now = time.monotonic()
+        busy = min(1.0, self._busy_s / max(now - self._reported_at, 1e-9))
+        self._busy_s, self._reported_at = 0.0, now
+        return busy
+
     def _reject(self, reason: str, message: str) -> None:
         self.rejected[reason] += 1
         self._warnings.warn(reason, f"{message} (rejected so far: {self.rejected[reason]})")
@@ -272,7 +293,12 @@ class GridLocalizer(Node):
                 values["last_log_evidence"] = f"{self.localization.log_evidence:.4f}"
             if math.isfinite(self.last_update_s):
                 values["last_update_ms"] = f"{self.last_update_s * 1e3:.1f}"
-        values["scans_missed"] = self.scan_gaps.missed
+                values["update_ms_median"] = f"{np.median(self.update_times) * 1e3:.1f}"
+                values["update_ms_max"] = f"{max(self.update_times) * 1e3:.1f}"
+        busy = self._busy_since_last_report()
+        values.update({"scans_received": self.scan_gaps.received,
+                       "scans_missed": self.scan_gaps.missed,
+                       "busy_percent": f"{100 * busy:.0f}"})
         values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
         values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
         problems = ["messages rejected"] if self.rejected else []
@@ -281,6 +307,9 @@ class GridLocalizer(Node):
         if missed_now:
             problems.append(f"falling behind the laser: {missed_now} scans missed since the "
                             f"last report")
+        elif busy >= BUSY_WARNING:
+            problems.append(f"falling behind the laser: updating {100 * busy:.0f}% of the "
+                            f"time, newer scans replace those waiting")
         self._diagnostics_pub.publish(status_array(self, "grid localization", values,
                                                    problems))
 

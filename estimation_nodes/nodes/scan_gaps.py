@@ -3,10 +3,10 @@
 A laser publishes at its own rate; the localizer's scan subscription keeps only the
 newest scan (depth 1), so while an update runs the scans that come replace one another
 and only the last is answered. Nothing in the transport reports those replaced: the
-stamps do. Between two scans received ``dt`` apart, ``round(dt / period) - 1`` were made
-and not received. The period is the scan's ``scan_time`` where the driver gives it, else
-the shortest interval between two received scans seen so far (the true period once the
-node has kept up with two scans in a row; until then the count is low).
+stamps do. Between two scans received ``dt`` apart, ``round(dt / scan_time) - 1`` were
+made and not received. A driver that leaves ``scan_time`` 0 gives no period, and no
+count is made: a recording's scans may come at irregular times (a log's scans thinned
+out), where any period guessed from the intervals would count scans that never were.
 """
 
 from __future__ import annotations
@@ -23,7 +23,6 @@ class ScanGaps:
         self.missed = 0
         self.received = 0
         self._last_ns: int | None = None
-        self._shortest_ns: int | None = None
 
     def note(self, stamp_ns: int | None, scan_time_s: float) -> int:
         """Note a received scan (its stamp, None if unstamped, and its ``scan_time``);
@@ -34,11 +33,9 @@ class ScanGaps:
         last, self._last_ns = self._last_ns, stamp_ns
         if last is None or stamp_ns <= last:    # the first, or time went back (a replay)
             return 0
-        interval = stamp_ns - last
-        if self._shortest_ns is None or interval < self._shortest_ns:
-            self._shortest_ns = interval
-        period = scan_time_s * 1e9 if 0 < scan_time_s < float("inf") else self._shortest_ns
-        gap = round(interval / period) - 1
+        if not 0 < scan_time_s < float("inf"):
+            return 0
+        gap = round((stamp_ns - last) / (scan_time_s * 1e9)) - 1
         if not 0 < gap <= LONGEST_GAP:
             return 0
         self.missed += gap

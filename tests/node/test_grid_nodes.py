@@ -54,6 +54,8 @@ def test_the_localizer_finds_the_simulated_robot_without_an_initial_pose(nodes, 
     nodes(PlanarRobot, map_file=CORRIDOR, seed=3, rate_hz=20.0)
     assert spin_until(executor, lambda: localizer.localization is not None
                       and localizer.localization.updates >= 15, 60.0)
+    # Every update's duration is kept for /diagnostics' median and maximum.
+    assert len(localizer.update_times) == localizer.handled["scan"] >= 15
     # The truth when the last scan used was taken: the pose carries that scan's stamp.
     last = seen.messages["pose"][-1]
     truths = {(m.header.stamp.sec, m.header.stamp.nanosec): m for m in seen.messages["true_pose"]}
@@ -131,7 +133,7 @@ def test_scans_the_localizer_never_saw_are_counted_and_reported(nodes, executor,
         # taken; a copy taken twice counts nothing.
         for _ in range(50):
             laser.publish(msg)
-            if spin_until(executor, lambda: localizer.scan_gaps.received > received, 0.2):
+            if spin_until(executor, lambda r=received: localizer.scan_gaps.received > r, 0.2):
                 break
         assert localizer.scan_gaps.received > received, f"scan {stamp_s} never taken"
     assert localizer.scan_gaps.missed == 3
