@@ -2,6 +2,7 @@
 
     python bench/real_buildings.py [--log intel|aces|PATH ...] [--scans N]
         [--resolution 0.1] [--heading-bins 72] [--belief-floor F ...] [--profile]
+        [--no-amcl]
 
 For each CARMEN log (../shared/data/carmen, see its README) a map is made from
 the log's SLAM-corrected poses at 0.05 m (mapping with known poses,
@@ -21,6 +22,12 @@ belief_floor 0 is the exact filter over the whole grid; a floor > 0 drops the
 states of less probability after each correction, and the steps run over the
 bounding box of what is left (core/grid/localization.py says what is dropped).
 Each configuration runs in a fresh process, so the memory figures are its own.
+
+The baseline, in the same run: Nav2's AMCL (PyPI's ``amcl``, the bench extra:
+amcl_baseline.py says what it binds) on the same map, given exactly the scans
+the first configuration updated with and the raw odometry at each, with its
+time per update and accuracy; every row's "x AMCL" is its median time over
+AMCL's. Left out, with a note, where ``amcl`` is not installed.
 """
 
 from __future__ import annotations
@@ -31,6 +38,7 @@ import math
 import resource
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -40,6 +48,7 @@ BENCH = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH))
 sys.path.insert(1, str(BENCH.parent))
 
+import amcl_baseline  # noqa: E402
 from timing import table  # noqa: E402
 
 from estimation_nodes.core.grid import steps as grid  # noqa: E402
@@ -86,7 +95,7 @@ def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
     grid.compiled_kernels(grid.COMPILED_MIN_STATES)
     odometry = iter(log.odometry)
     pending = next(odometry, None)
-    times, errors, headings = [], [], []
+    times, errors, headings, stamps = [], [], [], []
     profiler = _profiler(profile)
     for scan in log.scans[:scans]:
         stamp = _ns(scan.t)
@@ -107,15 +116,45 @@ def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
         if profiler:
             profiler.disable()
         times.append(time.perf_counter() - started)
+        stamps.append(stamp)
         pose = localization.estimate(settings.quality_radius, settings.quality_angle).pose
         errors.append(math.hypot(pose[0] - scan.pose[0], pose[1] - scan.pose[1]))
         headings.append(abs(math.remainder(pose[2] - scan.pose[2], 2 * math.pi)))
     if profiler:
         _print_profile(profiler)
-    errors_a, headings_a = np.array(errors), np.array(headings)
     return {"cells": list(model.free.shape), "states": int(np.prod(model.shape)),
-            "free_states": int(model.free.sum()) * heading_bins,
-            "updates": len(times), "times_ms": [1e3 * t for t in times],
+            "free_states": int(model.free.sum()) * heading_bins, "stamps_ns": stamps,
+            **_scores(times, errors, headings)}
+
+
+def run_amcl(log_path: Path, stamps_ns: list[int]) -> dict:
+    """AMCL on the scans taken at ``stamps_ns``, each with the raw odometry pose at or
+    before its time, from the same prior as the localizer."""
+    log = carmen.read_log(log_path)
+    occupancy = building_map(log)
+    first = log.scans[0].pose
+    baseline = amcl_baseline.AmclBaseline(
+        occupancy, first, np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2]))
+    taken = set(stamps_ns)
+    odometry, index = log.odometry, 0
+    times, errors, headings = [], [], []
+    for scan in log.scans:
+        if _ns(scan.t) not in taken:
+            continue
+        while index + 1 < len(odometry) and odometry[index + 1].t <= scan.t:
+            index += 1
+        started = time.perf_counter()
+        pose = baseline.update(scan.ranges, beam_angles(scan.ranges.size), RANGE_MAX,
+                               odometry[index].pose)
+        times.append(time.perf_counter() - started)
+        errors.append(math.hypot(pose[0] - scan.pose[0], pose[1] - scan.pose[1]))
+        headings.append(abs(math.remainder(pose[2] - scan.pose[2], 2 * math.pi)))
+    return {"cells": list(occupancy.cells.shape), **_scores(times, errors, headings)}
+
+
+def _scores(times: list[float], errors: list[float], headings: list[float]) -> dict:
+    errors_a, headings_a = np.array(errors), np.array(headings)
+    return {"updates": len(times), "times_ms": [1e3 * t for t in times],
             "near": float(np.mean((errors_a <= NEAR_M) & (headings_a <= NEAR_RAD))),
             "median_error_m": float(np.median(errors_a)),
             "median_error_deg": math.degrees(float(np.median(headings_a))),
@@ -152,12 +191,18 @@ def main() -> None:
     parser.add_argument("--belief-floor", type=float, action="append", default=[],
                         help="the localizer's belief_floor (default: 0 and its default)")
     parser.add_argument("--profile", action="store_true", help="cProfile of the updates")
+    parser.add_argument("--no-amcl", action="store_true", help="leave the AMCL baseline out")
     parser.add_argument("--one", help=argparse.SUPPRESS)   # a child's run, as JSON
+    parser.add_argument("--stamps", help=argparse.SUPPRESS)   # the AMCL child's scans
     args = parser.parse_args()
     if args.one:
         log, floor = args.one.split(",")
-        print(json.dumps(run(resolve(log), args.scans, args.resolution, args.heading_bins,
-                             float(floor), args.profile)))
+        if floor == "amcl":
+            stamps = json.loads(Path(args.stamps).read_text())
+            print(json.dumps(run_amcl(resolve(log), stamps)))
+        else:
+            print(json.dumps(run(resolve(log), args.scans, args.resolution,
+                                 args.heading_bins, float(floor), args.profile)))
         return
     logs = args.log or ["intel", "aces"]
     missing = [name for name in logs if not resolve(name).exists()]
@@ -165,17 +210,22 @@ def main() -> None:
         sys.exit(f"real_buildings: no log at {', '.join(str(resolve(n)) for n in missing)} "
                  f"(see ../shared/data/README.md)")
     floors = args.belief_floor or [0.0, spec_defaults(GRID_LOCALIZER_SPECS)["belief_floor"]]
+    with_amcl = not args.no_amcl and amcl_baseline.available()
+    if not args.no_amcl and not with_amcl:
+        print("real_buildings: no AMCL baseline: pip install amcl==0.1.2 (the bench extra)",
+              file=sys.stderr)
     rows = []
     for name in logs:
-        for floor in floors:
-            result = _child(args, name, floor)
-            rows.append(_row(name, floor, result))
-            print(table(HEADER, rows[-1:]), flush=True) if len(rows) == 1 else None
-    print(table(HEADER, rows))
+        results = [(f"grid, floor {floor:g}", _child(args, name, floor)) for floor in floors]
+        if with_amcl:
+            results.append(("AMCL", _amcl_child(args, name, results[0][1]["stamps_ns"])))
+        amcl_ms = float(np.median(results[-1][1]["times_ms"])) if with_amcl else None
+        rows += [_row(name, label, result, amcl_ms) for label, result in results]
+        print(table(HEADER, rows), flush=True)
 
 
-HEADER = ["log", "belief_floor", "cells", "states", "free states", "updates",
-          "median ms", "p90 ms", "max ms", "Hz (median)", "peak RSS MB",
+HEADER = ["log", "filter", "cells", "states", "free states", "updates",
+          "median ms", "p90 ms", "max ms", "Hz (median)", "x AMCL", "peak RSS MB",
           "within 0.2 m, 5 deg", "median error"]
 
 
@@ -187,13 +237,24 @@ def _child(args: argparse.Namespace, name: str, floor: float) -> dict:
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def _row(name: str, floor: float, result: dict) -> list[str]:
+def _amcl_child(args: argparse.Namespace, name: str, stamps_ns: list[int]) -> dict:
+    with tempfile.NamedTemporaryFile("w", suffix=".json") as stamps:
+        json.dump(stamps_ns, stamps)
+        stamps.flush()
+        command = [sys.executable, __file__, "--one", f"{name},amcl", "--stamps", stamps.name]
+        done = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def _row(name: str, label: str, result: dict, amcl_ms: float | None) -> list[str]:
     times = np.array(result["times_ms"])
     rows, cols = result["cells"]
-    return [Path(name).stem, f"{floor:g}", f"{cols} x {rows}", f"{result['states'] / 1e6:.2f} M",
-            f"{result['free_states'] / 1e6:.2f} M", str(result["updates"]),
+    states = f"{result['states'] / 1e6:.2f} M" if "states" in result else "-"
+    free = f"{result['free_states'] / 1e6:.2f} M" if "free_states" in result else "-"
+    ratio = f"{np.median(times) / amcl_ms:.2f}" if amcl_ms else "-"
+    return [Path(name).stem, label, f"{cols} x {rows}", states, free, str(result["updates"]),
             f"{np.median(times):.1f}", f"{np.percentile(times, 90):.1f}", f"{times.max():.1f}",
-            f"{1e3 / np.median(times):.1f}", f"{result['peak_rss_mb']:.0f}",
+            f"{1e3 / np.median(times):.1f}", ratio, f"{result['peak_rss_mb']:.0f}",
             f"{100 * result['near']:.1f} %",
             f"{100 * result['median_error_m']:.1f} cm, {result['median_error_deg']:.1f} deg"]
 

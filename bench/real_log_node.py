@@ -1,0 +1,231 @@
+"""A real log through the running grid_localizer, played at a laser's rate.
+
+    python bench/real_log_node.py [--log intel|aces|PATH] [--scan-rate 10]
+        [--resolution 0.1] [--heading-bins 72] [--seconds S]
+
+What a user does with a CARMEN log, through the real executables: ``estimation_import
+carmen`` makes a recording, ``estimation_map`` a map from its corrected poses (0.05 m),
+``grid_localizer`` runs on that map as its own process (given the first corrected pose
+on ``initialpose``, 0.3 m and 10 degrees), and ``estimation_play`` plays the recording's
+``/scan`` and ``/odom`` into it. The corrected logs hold a scan every 3 s or so (Intel:
+910 in 44 minutes); the play's rate is set so that the scans come at ``--scan-rate``
+(default 10 Hz, a laser's), the odometry with them.
+
+Printed: the scans played and their rate, what the node did with them from its
+/diagnostics (updated, not due for lack of motion, missed, rejected), its update time
+(median and maximum, its own measure), its peak resident memory (VmHWM), and the
+published poses against the corrected pose of their scan (paired by stamp).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parent
+sys.path.insert(0, str(BENCH))
+sys.path.insert(1, str(BENCH.parent))
+from real_buildings import (  # noqa: E402
+    LOGS,
+    NEAR_M,
+    NEAR_RAD,
+    PRIOR_SIGMA_M,
+    PRIOR_SIGMA_RAD,
+    RANGE_MAX,
+)
+from ros_env import confine_ros  # noqa: E402
+from timing import table  # noqa: E402
+
+from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
+from estimation_nodes.tools.importers import carmen  # noqa: E402
+
+
+def executable(name: str) -> str:
+    return str(Path(sys.executable).parent / name)
+
+
+def prepare(log_path: Path, work: Path) -> tuple[Path, Path]:
+    """The recording and the map, made by the package's own tools."""
+    recording, stem = work / "run.mcap", work / "map"
+    subprocess.run([executable("estimation_import"), "carmen", str(log_path), "-o",
+                    str(recording), "--range-max", str(RANGE_MAX)], check=True,
+                   stdout=subprocess.DEVNULL)
+    subprocess.run([executable("estimation_map"), str(recording), "-o", str(stem)],
+                   check=True, stdout=subprocess.DEVNULL)
+    return recording, stem.with_suffix(".yaml")
+
+
+def peak_mib(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+class Watcher:
+    """The bench's node: gives the initial pose, keeps the poses and the latest
+    diagnostics."""
+
+    def __init__(self) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        from estimation_nodes.nodes.qos import latched_qos
+
+        self.node = Node("real_log_bench")
+        self.poses: dict[int, tuple[float, float, float]] = {}
+        self.diagnostics: dict[str, str] = {}
+        self.node.create_subscription(PoseWithCovarianceStamped, "pose", self._on_pose,
+                                      latched_qos(1000))
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics,
+                                      10)
+        self.initial = self.node.create_publisher(PoseWithCovarianceStamped, "initialpose",
+                                                  10)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+
+    def _on_pose(self, msg) -> None:
+        from estimation_nodes.nodes.grid_messages import planar_pose
+
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        self.poses[stamp] = planar_pose(msg.pose.pose)
+
+    def _on_diagnostics(self, msg) -> None:
+        if msg.status and msg.status[0].name.startswith("grid_localizer"):
+            self.diagnostics = {v.key: v.value for v in msg.status[0].values}
+
+    def give_initial_pose(self, pose: tuple[float, float, float]) -> None:
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+
+        from estimation_nodes.nodes.grid_messages import fill_pose
+
+        msg = PoseWithCovarianceStamped()
+        msg.header.frame_id = "map"
+        fill_pose(msg.pose.pose, *pose)
+        covariance = np.zeros((6, 6))
+        covariance[0, 0] = covariance[1, 1] = PRIOR_SIGMA_M ** 2
+        covariance[5, 5] = PRIOR_SIGMA_RAD ** 2
+        msg.pose.covariance = covariance.ravel().tolist()
+        self.initial.publish(msg)
+
+    def spin(self, condition, timeout: float) -> bool:
+        return spin_until(self.executor, condition, timeout)
+
+
+def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]:
+    import rclpy
+
+    log = carmen.read_log(log_path)
+    recording, map_yaml = prepare(log_path, work)
+    period = float(np.median(np.diff([scan.t for scan in log.scans])))
+    rate = period * args.scan_rate
+    env = confine_ros(83)
+    localizer = subprocess.Popen(
+        [executable("grid_localizer"), "--ros-args", "-p", f"map_file:={map_yaml}",
+         "-p", f"resolution:={args.resolution}", "-p", f"heading_bins:={args.heading_bins}",
+         "-p", "max_states:=200000000", "-p", f"laser_max_range:={RANGE_MAX}",
+         "-p", "diagnostics_period:=0.5"],
+        env=env, stdout=(work / "localizer.log").open("w"), stderr=subprocess.STDOUT)
+    rclpy.init()
+    watcher = Watcher()
+    play = None
+    try:
+        if not wait_for_line(localizer, work / "localizer.log", "ready:", 300):
+            sys.exit("real_log_node: the localizer never said ready:\n"
+                     + (work / "localizer.log").read_text())
+        watcher.spin(lambda: watcher.initial.get_subscription_count() > 0 and watcher.poses,
+                     60)
+        count = len(watcher.poses)
+        watcher.give_initial_pose(log.scans[0].pose)
+        watcher.spin(lambda: len(watcher.poses) > count, 30)
+        play_command = [executable("estimation_play"), str(recording), "--rate", f"{rate:g}",
+                        "--topics", "/scan", "/odom", "--wait-for-subscribers", "30",
+                        "--delay", "2"]
+        play = subprocess.Popen(play_command, env=env, stdout=(work / "play.log").open("w"),
+                                stderr=subprocess.STDOUT)
+        limit = args.seconds or (log.scans[-1].t - log.scans[0].t) / rate + 60
+        started = time.monotonic()
+        watcher.spin(lambda: play.poll() is not None, limit)
+        played_s = time.monotonic() - started
+        if play.poll() is None:
+            stop_process(play)      # --seconds: the first part of the log only
+        watcher.spin(lambda: False, 3.0)     # the last update and diagnostics
+        peak = peak_mib(localizer.pid)
+    finally:
+        if play is not None and play.poll() is None:
+            stop_process(play)
+        stop_process(localizer)
+        watcher.node.destroy_node()
+        rclpy.try_shutdown()
+    return summary(log, watcher, rate, played_s, peak)
+
+
+def wait_for_line(process: subprocess.Popen, output: Path, text: str,
+                  timeout: float) -> bool:
+    """Whether ``process`` wrote ``text`` to ``output`` (its log) within ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and process.poll() is None:
+        if text in output.read_text():
+            return True
+        time.sleep(0.1)
+    return False
+
+
+def summary(log, watcher: Watcher, rate: float, played_s: float, peak: float) -> list[list[str]]:
+    truth = {int(round(scan.t * 1e9)): scan.pose for scan in log.scans}
+    paired = [(pose, truth[stamp]) for stamp, pose in watcher.poses.items() if stamp in truth]
+    errors = np.array([math.hypot(p[0] - t[0], p[1] - t[1]) for p, t in paired])
+    turns = np.array([abs(math.remainder(p[2] - t[2], 2 * math.pi)) for p, t in paired])
+    d = watcher.diagnostics
+    handled = int(d.get("handled.scan", 0))
+    not_due = int(d.get("handled.scan_without_motion", 0))
+    rejected = {k: v for k, v in d.items() if k.startswith("rejected.")}
+    scans = sum(1 for s in log.scans if s.t - log.scans[0].t <= played_s * rate)
+    return [
+        ["scans played (of the log's)", f"{scans} of {len(log.scans)}"],
+        ["play rate (x the log's) -> scan rate", f"{rate:.1f} -> {scans / played_s:.1f} Hz"],
+        ["received / updates / not due (no motion)", f"{d.get('scans_received', '?')} / "
+         f"{handled} / {not_due}"],
+        ["rejected", ", ".join(f"{k[9:]} {v}" for k, v in rejected.items()) or "none"],
+        ["update, median / max (node's own)", f"{d.get('update_ms_median', '?')} / "
+         f"{d.get('update_ms_max', '?')} ms"],
+        ["localizer peak RSS (VmHWM)", f"{peak:.0f} MiB"],
+        ["poses paired with a corrected pose", str(len(paired))],
+        ["within 0.2 m and 5 deg", f"{100 * np.mean((errors <= NEAR_M) & (turns <= NEAR_RAD)):.1f}"
+         " %" if paired else "-"],
+        ["median error", f"{100 * np.median(errors):.1f} cm, "
+         f"{math.degrees(np.median(turns)):.1f} deg" if paired else "-"],
+    ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--log", default="intel", help="intel, aces or a CARMEN log's path")
+    parser.add_argument("--scan-rate", type=float, default=10.0,
+                        help="scans per second the play makes (default: %(default)s)")
+    parser.add_argument("--resolution", type=float, default=0.1)
+    parser.add_argument("--heading-bins", type=int, default=72)
+    parser.add_argument("--seconds", type=float, default=0.0,
+                        help="play only this long (default: the whole log)")
+    args = parser.parse_args()
+    log_path = LOGS.get(args.log, Path(args.log))
+    if not log_path.exists():
+        sys.exit(f"real_log_node: no log at {log_path} (see ../shared/data/README.md)")
+    with tempfile.TemporaryDirectory() as work:
+        rows = run(args, log_path, Path(work))
+    print(f"grid_localizer on {log_path.name} at {args.resolution} m, {args.heading_bins} "
+          f"headings, through DDS")
+    print(table(["figure", "value"], rows))
+
+
+if __name__ == "__main__":
+    main()
