@@ -160,6 +160,42 @@ def test_a_certain_belief_gives_its_pose_quality_one_and_a_small_covariance():
     np.testing.assert_allclose(np.diag(cov), [0.01 / 12, 0.01 / 12, (math.pi / 4) ** 2 / 12])
 
 
+def test_the_refined_pose_is_the_mean_of_the_mode_and_its_neighbours():
+    model = small_model(rows=20, cols=20, bins=8, obstacles=0.0)
+    belief = np.zeros(model.shape)
+    belief[3, 5, 6] = 1.0
+    # One state: its centre.
+    assert grid.refined_pose(belief, model, (3, 5, 6)) == pytest.approx(
+        grid.pose_of(model, (3, 5, 6)), abs=1e-12)
+    # A quarter of the mass one cell right and a heading bin up: a quarter of the way.
+    belief[3, 5, 6], belief[4, 5, 7] = 0.75, 0.25
+    x, y, yaw = grid.pose_of(model, (3, 5, 6))
+    assert grid.refined_pose(belief, model, (3, 5, 6)) == pytest.approx(
+        (x + 0.025, y, yaw + 0.25 * math.pi / 4), abs=1e-12)
+    # Mass farther than one cell or bin from the mode is not counted.
+    belief[3, 5, 9] = belief[6, 5, 6] = 0.1
+    assert grid.refined_pose(belief, model, (3, 5, 6)) == pytest.approx(
+        (x + 0.025, y, yaw + 0.25 * math.pi / 4), abs=1e-12)
+
+
+def test_the_refined_heading_crosses_the_first_bin_cyclically():
+    model = small_model(rows=5, cols=5, bins=8, obstacles=0.0)
+    belief = np.zeros(model.shape)
+    belief[0, 2, 2], belief[7, 2, 2] = 0.5, 0.5
+    # Halfway between bin 7 (-45 degrees) and bin 0: -22.5 degrees, not +157.5.
+    assert grid.refined_pose(belief, model, (0, 2, 2))[2] == pytest.approx(-math.pi / 8)
+
+
+def test_the_refined_pose_of_a_mode_at_the_map_edge():
+    model = small_model(rows=5, cols=5, bins=8, obstacles=0.0)
+    belief = np.zeros(model.shape)
+    belief[0, 0, 0], belief[0, 1, 0] = 0.5, 0.5
+    x, y, _ = grid.pose_of(model, (0, 0, 0))
+    assert grid.refined_pose(belief, model, (0, 0, 0))[:2] == pytest.approx((x, y + 0.05))
+    with pytest.raises(errors.InvalidInputError, match="state"):
+        grid.refined_pose(belief, model, (0, 5, 0))
+
+
 def test_two_far_modes_give_quality_one_half():
     model = small_model(rows=20, cols=20, obstacles=0.0)
     belief = np.zeros(model.shape)

@@ -57,7 +57,8 @@ ODOMETRY_HISTORY = 200
 
 @dataclass(frozen=True)
 class Estimate:
-    """What the localizer publishes: the most likely pose, the belief's covariance
+    """What the localizer publishes: the most likely pose (the belief's mean over the
+    most likely state and its neighbours: finer than the grid), the belief's covariance
     around it, and the probability near it."""
 
     pose: Pose
@@ -242,12 +243,13 @@ class GridLocalization:
         return window.crop(self.model, box), window.window_of(self.belief, box)
 
     def estimate(self, radius: float, angle: float) -> Estimate:
-        """The most likely pose, the covariance around it, and the probability within
+        """The most likely pose (steps.refined_pose of the most likely state), the
+        covariance around it, and the probability within
         ``radius`` (m) and ``angle`` (rad) of it."""
         radius, angle = check_non_negative("radius", radius), check_non_negative("angle", angle)
         box, model = self._box, self.model
         belief = window.window_of(self.belief, box)
-        pose = grid._pose_of(model, grid._most_likely_state(belief), box)
+        pose = grid._refined_pose(belief, model, grid._most_likely_state(belief), box)
         return Estimate(pose, grid._covariance_around(belief, model, pose, box),
                         grid._mass_near(belief, model, pose, radius, angle, box))
 

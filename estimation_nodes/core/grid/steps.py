@@ -722,6 +722,36 @@ def _pose_of(model: GridModel, state: tuple[int, int, int],
     return float(xs[j]), float(ys[i]), float(_wrap_scalar(k * model.bin_width))
 
 
+def refined_pose(belief: FloatArray, model: GridModel,
+                 state: tuple[int, int, int]) -> tuple[float, float, float]:
+    """The belief's mean over ``state`` and its neighbours (one cell and one heading bin
+    each way, headings cyclic): a pose finer than the grid, near the mode."""
+    _check_model(model)
+    pose_of(model, state)     # validates the state
+    return _refined_pose(check_belief(belief, model), model, state)
+
+
+def _refined_pose(belief: FloatArray, model: GridModel, state: tuple[int, int, int],
+                  box: tuple[int, int, int, int] | None = None) -> tuple[float, float, float]:
+    """With ``box``, ``state`` is of the window's belief. The cell centres of a
+    neighbourhood weighted by their probability; a mode whose neighbours have none is its
+    own centre."""
+    k, i, j = state
+    xs, ys = _centres(model, box)
+    rows = slice(max(i - 1, 0), i + 2)
+    cols = slice(max(j - 1, 0), j + 2)
+    bins = (k + np.arange(-1, 2)) % belief.shape[0]
+    near = belief[bins][:, rows, cols]
+    total = float(near.sum())
+    if not total > 0:
+        return _pose_of(model, state, box)
+    x = float(near.sum(axis=(0, 1)) @ xs[cols]) / total
+    y = float(near.sum(axis=(0, 2)) @ ys[rows]) / total
+    # Offsets of -1, 0, +1 bins from the mode's heading: no wrap within the neighbourhood.
+    shift = float(near.sum(axis=(1, 2)) @ np.arange(-1.0, 2.0)) / total
+    return x, y, float(_wrap_scalar((k + shift) * model.bin_width))
+
+
 def covariance_around(belief: FloatArray, model: GridModel,
                       pose: tuple[float, float, float]) -> FloatArray:
     """The 3 x 3 second moment of (x, y, yaw) about ``pose`` under the belief (yaw
