@@ -1,7 +1,7 @@
 """A real log through the running grid_localizer, played at a laser's rate.
 
     python bench/real_log_node.py [--log intel|aces|PATH] [--scan-rate 10]
-        [--resolution 0.1] [--heading-bins 72] [--seconds S]
+        [--resolution 0.1] [--heading-bins 72] [--max-odom-jump 5] [--seconds S]
 
 What a user does with a CARMEN log, through the real executables: ``estimation_import
 carmen`` makes a recording, ``estimation_map`` a map from its corrected poses (0.05 m),
@@ -133,7 +133,7 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
         [executable("grid_localizer"), "--ros-args", "-p", f"map_file:={map_yaml}",
          "-p", f"resolution:={args.resolution}", "-p", f"heading_bins:={args.heading_bins}",
          "-p", "max_states:=200000000", "-p", f"laser_max_range:={RANGE_MAX}",
-         "-p", "diagnostics_period:=0.5"],
+         "-p", "diagnostics_period:=0.5", "-p", f"max_odom_jump:={args.max_odom_jump}"],
         env=env, stdout=(work / "localizer.log").open("w"), stderr=subprocess.STDOUT)
     rclpy.init()
     watcher = Watcher()
@@ -214,6 +214,10 @@ def main() -> None:
                         help="scans per second the play makes (default: %(default)s)")
     parser.add_argument("--resolution", type=float, default=0.1)
     parser.add_argument("--heading-bins", type=int, default=72)
+    # The corrected logs keep an odometry line per scan, seconds apart: a step of a metre
+    # or more is the robot's motion there, not a jump of the odometry.
+    parser.add_argument("--max-odom-jump", type=float, default=5.0,
+                        help="the localizer's max_odom_jump (m; default: %(default)s)")
     parser.add_argument("--seconds", type=float, default=0.0,
                         help="play only this long (default: the whole log)")
     args = parser.parse_args()
