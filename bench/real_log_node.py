@@ -220,12 +220,19 @@ def main() -> None:
                         help="the localizer's max_odom_jump (m; default: %(default)s)")
     parser.add_argument("--seconds", type=float, default=0.0,
                         help="play only this long (default: the whole log)")
+    parser.add_argument("--keep", type=Path, metavar="DIR",
+                        help="make the recording, map and the processes' logs in DIR and "
+                             "keep them (default: a temporary folder)")
     args = parser.parse_args()
     log_path = LOGS.get(args.log, Path(args.log))
     if not log_path.exists():
         sys.exit(f"real_log_node: no log at {log_path} (see ../shared/data/README.md)")
-    with tempfile.TemporaryDirectory() as work:
-        rows = run(args, log_path, Path(work))
+    if args.keep:
+        args.keep.mkdir(parents=True, exist_ok=True)
+        rows = run(args, log_path, args.keep)
+    else:
+        with tempfile.TemporaryDirectory() as work:
+            rows = run(args, log_path, Path(work))
     print(f"grid_localizer on {log_path.name} at {args.resolution} m, {args.heading_bins} "
           f"headings, through DDS")
     print(table(["figure", "value"], rows))

@@ -219,6 +219,39 @@ def test_gaussian_prior_centres_on_the_given_pose():
     assert prior.sum() == pytest.approx(1.0)
 
 
+def test_gaussian_prior_is_the_gaussian_over_the_free_states():
+    model = small_model(rows=9, cols=11, bins=8, obstacles=0.3)
+    covariance = np.array([[0.04, 0.01, 0.02], [0.01, 0.09, -0.03], [0.02, -0.03, 0.3]])
+    pose = (0.1, 1.6, 3.0)
+    prior = grid.gaussian_prior(model, *pose, covariance)
+    # Term by term, every state: the Gaussian with the grid's own spread added.
+    floor = np.diag([(model.resolution / 2) ** 2] * 2 + [(model.bin_width / 2) ** 2])
+    information = np.linalg.inv(covariance + floor)
+    xs, ys = model.cell_centres()
+    expected = np.zeros(model.shape)
+    for k, heading in enumerate(model.headings()):
+        for i, y in enumerate(ys):
+            for j, x in enumerate(xs):
+                d = np.array([x - pose[0], y - pose[1],
+                              math.remainder(heading - pose[2], 2 * math.pi)])
+                expected[k, i, j] = math.exp(-0.5 * d @ information @ d) * model.free[i, j]
+    np.testing.assert_allclose(prior, expected / expected.sum(), rtol=1e-9, atol=1e-15)
+
+
+def test_a_prior_that_covers_no_free_cell_goes_to_the_nearest_free_states():
+    model = small_model(rows=9, cols=11, bins=8, obstacles=0.0)
+    free = model.free.copy()
+    free[:, :6] = False
+    model = grid.GridModel(free=free, log_field=model.log_field, log_outside=model.log_outside,
+                           resolution=model.resolution, origin=model.origin, heading_bins=8)
+    xs, ys = model.cell_centres()
+    # Far left of the free cells and very sure: all the mass on the nearest free column.
+    prior = grid.gaussian_prior(model, xs[0], ys[4], 0.0, np.diag([1e-4, 1e-4, 1e-4]))
+    assert prior.sum() == pytest.approx(1.0) and np.all(np.isfinite(prior))
+    assert grid.most_likely_state(prior) == (0, 4, 6)
+    assert prior[:, :, :6].sum() == 0.0
+
+
 def test_bad_models_are_refused_with_the_field_named():
     with pytest.raises(ValueError, match="resolution"):
         grid.GridModel(np.ones((2, 2), bool), np.zeros((2, 2)), -1.0, 0.0, (0, 0), 4)

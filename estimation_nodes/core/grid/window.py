@@ -95,7 +95,8 @@ def drop_below(belief: FloatArray, floor: float) -> tuple[FloatArray, float]:
     if floor <= 0.0:
         return belief, 0.0
     small = belief < min(floor, float(belief.max()))
-    dropped = float(belief[small].sum())
+    # Summed where small, not as belief[small]: that copy is most of a building's belief.
+    dropped = float(np.sum(belief, where=small))
     if dropped > 0.0:
         belief[small] = 0.0
         belief /= float(belief.sum())
