@@ -82,6 +82,9 @@ def main() -> None:
         for step in range(args.updates + 1):
             pose = (pose[0] + 0.3 if pose[0] < 8 else -8.0, pose[1], 0.0)
             odom = Odometry()
+            # Stamped with the scan's time: the localizer takes a scan with the odometry of
+            # its time (a scan without it waits, then is dropped).
+            odom.header.stamp.sec = step + 1
             fill_pose(odom.pose.pose, 0.3 * (step + 1), 0.0, 0.0)
             odom_pub.publish(odom)
             # The odometry first: the localizer follows the latest, and a scan that comes

@@ -149,7 +149,9 @@ class PlanarRobot(Node):
 
     def _publish_scan(self, stamp) -> None:
         sensor = self._sensor
-        true_ranges = planar.ray_cast(self._world, self._pose, self._angles, sensor.max_range)
+        # From the laser's place on the robot (laser_pose), as a mounted laser sees.
+        laser = planar.sensor_at(self._pose, sensor.laser_pose)
+        true_ranges = planar.ray_cast(self._world, laser, self._angles, sensor.max_range)
         ranges = planar.noisy_ranges(true_ranges, self._rng, self._settings.scan_noise_std,
                                      self._settings.scan_random_fraction, sensor.max_range)
         scan = LaserScan()

@@ -22,7 +22,8 @@ def sensor_field(values: Mapping[str, Any]) -> SensorField:
     return SensorField(z_hit=values["laser_z_hit"], z_rand=values["laser_z_rand"],
                        sigma_hit=values["laser_sigma_hit"],
                        max_range=values["laser_max_range"],
-                       max_distance=values["laser_likelihood_max_dist"])
+                       max_distance=values["laser_likelihood_max_dist"],
+                       laser_pose=tuple(values["laser_pose"]))
 
 
 def odometry_noise(values: Mapping[str, Any]) -> OdometryNoise:

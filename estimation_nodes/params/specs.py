@@ -242,6 +242,8 @@ GRID_MODEL_SPECS = (
               read_only=True, min_value=0.1, max_value=1000.0),
     ParamSpec("laser_likelihood_max_dist", 2.0, "Distances to obstacles are capped at this "
               "(m) in the likelihood field.", read_only=True, min_value=0.01, max_value=100.0),
+    ParamSpec("laser_pose", [0.0, 0.0, 0.0], "[x, y, yaw] of the laser on the robot (m, m, "
+              "rad; base_link -> laser frame): each beam starts there.", read_only=True),
     ParamSpec("alpha1", 0.2, "Rotation noise from rotation (AMCL's alpha1).", read_only=True,
               min_value=0.0, max_value=10.0),
     ParamSpec("alpha2", 0.2, "Rotation noise from translation (rad per m).", read_only=True,

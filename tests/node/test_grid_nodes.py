@@ -196,6 +196,8 @@ def test_a_map_from_the_topic_and_a_bad_one(nodes, executor, collector_factory):
     ({"map_file": CORRIDOR, "resolution": 0.07}, "whole multiple"),
     ({"map_file": CORRIDOR, "max_states": 1000}, "max_states"),
     ({"frame_id": " "}, "frame_id"),
+    ({"laser_pose": [0.25, 0.0]}, "laser_pose"),
+    ({"laser_pose": [0.25, 0.0, float("inf")]}, "laser_pose"),
 ])
 def test_bad_localizer_parameters_are_one_clear_error(context, values, message):
     with pytest.raises(ConfigurationError, match=message):

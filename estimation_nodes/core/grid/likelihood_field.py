@@ -16,7 +16,7 @@ import numpy as np
 
 from estimation_nodes.core.errors import InvalidInputError, MapError
 from estimation_nodes.core.grid.occupancy import FREE, OCCUPIED, OccupancyMap
-from estimation_nodes.core.grid.steps import GridModel
+from estimation_nodes.core.grid.steps import GridModel, mounting_pose
 from estimation_nodes.core.validation import (
     as_real_array,
     check_integer,
@@ -34,8 +34,11 @@ class SensorField:
     sigma_hit: float
     max_range: float
     max_distance: float
+    #: The laser's mounting pose on the robot (x m, y m, yaw rad): base_link -> laser.
+    laser_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "laser_pose", mounting_pose(self.laser_pose))
         for name in ("z_hit", "z_rand"):
             object.__setattr__(self, name, check_non_negative(name, getattr(self, name)))
         for name in ("sigma_hit", "max_range", "max_distance"):
@@ -79,7 +82,7 @@ def grid_model(occupancy: OccupancyMap, resolution: float, heading_bins: int,
     return GridModel(free=free, log_field=log_field(nearest, sensor),
                      log_outside=float(log_field(np.array(sensor.max_distance), sensor)),
                      resolution=resolution, origin=occupancy.origin,
-                     heading_bins=heading_bins)
+                     heading_bins=heading_bins, laser_pose=sensor.laser_pose)
 
 
 def log_field(distance: np.ndarray, sensor: SensorField) -> np.ndarray:

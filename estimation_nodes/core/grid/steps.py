@@ -92,6 +92,8 @@ class GridModel:
     resolution: float
     origin: tuple[float, float]
     heading_bins: int
+    #: The laser's mounting pose on the robot (x m, y m, yaw rad): a beam starts there.
+    laser_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: The largest |log likelihood| one beam can score (in the field or outside it).
     log_bound: float = field(init=False, repr=False, compare=False)
 
@@ -117,7 +119,8 @@ class GridModel:
                 f"{resolution:g} m at {origin} reaches past {MAX_MAP_EXTENT:g} m")
         for name, value in (("free", free), ("log_field", log_field), ("log_outside", log_outside),
                             ("resolution", resolution), ("origin", origin),
-                            ("heading_bins", heading_bins)):
+                            ("heading_bins", heading_bins),
+                            ("laser_pose", mounting_pose(self.laser_pose))):
             object.__setattr__(self, name, value)
         object.__setattr__(self, "log_bound",
                            max(float(np.abs(log_field).max()), abs(log_outside)))
@@ -172,6 +175,20 @@ class OdometryNoise:
 
 
 # --- argument checks -----------------------------------------------------------------------
+
+
+#: The farthest a laser may sit from the robot's centre (m): further is a unit mistake.
+MAX_MOUNTING_OFFSET = 100.0
+
+
+def mounting_pose(value: Any) -> tuple[float, float, float]:
+    """A sensor's (x, y, yaw) on the robot: finite, within MAX_MOUNTING_OFFSET."""
+    x, y, yaw = _numbers("laser_pose", value, ("x", "y", "yaw"))
+    if math.hypot(x, y) > MAX_MOUNTING_OFFSET:
+        raise InvalidInputError(f"laser_pose: expected the laser within "
+                                f"{MAX_MOUNTING_OFFSET:g} m of the robot's centre, got "
+                                f"({x:g}, {y:g})")
+    return x, y, yaw
 
 
 def _numbers(name: str, value: Any, parts: tuple[str, ...]) -> tuple[float, ...]:
@@ -500,14 +517,23 @@ def beam_endpoints(model: GridModel, ranges: FloatArray, angles: FloatArray) -> 
 
 def _beam_endpoints(model: GridModel, ranges: FloatArray, angles: FloatArray) -> np.ndarray:
     rows, cols = model.free.shape
-    theta = model.headings()[:, None] + angles[None, :]
+    headings = model.headings()
+    mount_x, mount_y, mount_yaw = model.laser_pose
+    theta = (headings + mount_yaw)[:, None] + angles[None, :]
+    # Where the laser sits, in cells from the state cell's centre, for each heading (0 for
+    # a laser at the centre: the sums below are then the same bits as without it).
+    mount_rows = ((mount_x * np.sin(headings) + mount_y * np.cos(headings))
+                  / model.resolution)[:, None]
+    mount_cols = ((mount_x * np.cos(headings) - mount_y * np.sin(headings))
+                  / model.resolution)[:, None]
     # A beam of rows + cols cells or more is longer than the map's diagonal: it ends off
     # the map from every state cell, as it does at that length, which keeps the products
     # finite (a range of 1e300 m in cells may overflow, and inf * sin(0) is NaN).
     with np.errstate(over="ignore"):
         r = np.minimum(ranges[None, :] / model.resolution, float(rows + cols))
-    ends = np.stack([np.clip(np.floor(0.5 + r * np.sin(theta)), -rows, rows),
-                     np.clip(np.floor(0.5 + r * np.cos(theta)), -cols, cols)], axis=-1)
+    ends = np.stack([np.clip(np.floor(0.5 + (mount_rows + r * np.sin(theta))), -rows, rows),
+                     np.clip(np.floor(0.5 + (mount_cols + r * np.cos(theta))), -cols, cols)],
+                    axis=-1)
     return ends.astype(np.int64)
 
 

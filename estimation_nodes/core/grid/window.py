@@ -80,7 +80,8 @@ def crop(model: grid.GridModel, box: Box) -> grid.GridModel:
     # cleanly (core/compiled_loader.py).
     return grid.GridModel(np.ascontiguousarray(model.free[r0:r1, c0:c1]),
                           np.ascontiguousarray(model.log_field[r0:r1, c0:c1]),
-                          model.log_outside, model.resolution, origin, model.heading_bins)
+                          model.log_outside, model.resolution, origin, model.heading_bins,
+                          model.laser_pose)
 
 
 def window_of(belief: FloatArray, box: Box) -> FloatArray:

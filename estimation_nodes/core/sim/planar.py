@@ -83,6 +83,14 @@ def compose(pose: Pose, delta: tuple[float, float, float]) -> Pose:
             _wrap(pose[2] + rot1 + rot2))
 
 
+def sensor_at(pose: Pose, mounting: tuple[float, float, float]) -> Pose:
+    """Where a sensor mounted at ``mounting`` (x, y, yaw on the robot) is, with the robot
+    at ``pose``."""
+    x, y, yaw = mounting
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    return pose[0] + x * c - y * s, pose[1] + x * s + y * c, _wrap(pose[2] + yaw)
+
+
 def sample_odometry(delta: tuple[float, float, float], noise: OdometryNoise,
                     rng: np.random.Generator) -> tuple[float, float, float]:
     """The motion odometry reports for a true ``delta``, drawn from the odometry motion
