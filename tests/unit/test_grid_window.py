@@ -40,6 +40,18 @@ def tracked_pair(model, floor, kidnap=0.0, compiled=True):
     return dense, windowed
 
 
+def assert_the_same_filter(windowed, dense):
+    """Belief, evidence, estimate, entropy and belief map equal to rounding."""
+    np.testing.assert_allclose(windowed.belief, dense.belief, rtol=0, atol=1e-12)
+    assert windowed.log_evidence == pytest.approx(dense.log_evidence, abs=1e-9)
+    a, b = dense.estimate(0.3, 0.2), windowed.estimate(0.3, 0.2)
+    np.testing.assert_allclose(b.pose, a.pose, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(b.covariance, a.covariance, rtol=1e-9, atol=1e-12)
+    assert b.quality == pytest.approx(a.quality, abs=1e-12)
+    assert windowed.entropy_bits() == pytest.approx(dense.entropy_bits(), abs=1e-9)
+    np.testing.assert_array_equal(windowed.belief_map(), dense.belief_map())
+
+
 @pytest.mark.parametrize("rows, cols, small", [(40, 50, False), (120, 130, True)])
 def test_the_window_follows_the_dense_filter_to_rounding(rows, cols, small):
     """A floor of 1e-30 drops only what is already ~0: every update equals the dense
@@ -53,17 +65,10 @@ def test_the_window_follows_the_dense_filter_to_rounding(rows, cols, small):
         for loc in (dense, windowed):
             loc.on_odometry(odometry, (step + 1) * SECOND)
             loc.update(ranges, angles, (step + 1) * SECOND)
-        np.testing.assert_allclose(windowed.belief, dense.belief, rtol=0, atol=1e-12)
-        assert windowed.log_evidence == pytest.approx(dense.log_evidence, abs=1e-9)
-        a, b = dense.estimate(0.3, 0.2), windowed.estimate(0.3, 0.2)
-        np.testing.assert_allclose(b.pose, a.pose, rtol=0, atol=1e-12)
-        np.testing.assert_allclose(b.covariance, a.covariance, rtol=1e-9, atol=1e-15)
-        assert b.quality == pytest.approx(a.quality, abs=1e-12)
-        np.testing.assert_array_equal(windowed.belief_map(), dense.belief_map())
-    r0, r1, c0, c1 = windowed._box
+        assert_the_same_filter(windowed, dense)
     # In the small room (numpy's path) the tails above 1e-30 reach every wall; in the
-    # large one (compiled) the window stays small.
-    assert not small or (r1 - r0) * (c1 - c0) < 0.5 * rows * cols
+    # large one (compiled) the windows stay small.
+    assert not small or windowed.window_states < 0.5 * rows * cols * 16
 
 
 def test_a_floor_drops_at_most_floor_per_state_and_never_the_largest():
@@ -112,19 +117,21 @@ def test_the_kidnap_lattice_correction_is_bayes_rule_over_the_mixed_prior():
     box = (8, 16, 10, 18)
     ranges, angles = scan()
     share, weight = 0.01, 0.7
-    posterior, merged_box, log_evidence, left_out = window.correct_with_kidnap(
-        window.window_of(belief, box), model, box, ranges, angles, weight, share, floor=0.0)
+    correction = window.correct_boxes([window.window_of(belief, box)], [box], model, ranges,
+                                      angles, weight, share, floor=0.0)
     lattice = np.zeros(model.shape)
     lattice[::2, ::2, ::2] = model.free[::2, ::2]
     prior = (1 - share) * belief + share * lattice / lattice.sum()
     expected, expected_evidence = grid.correct(
         prior, weight * grid.scan_log_likelihood(model, ranges, angles))
     full = np.zeros(model.shape)
-    r0, r1, c0, c1 = merged_box
-    full[:, r0:r1, c0:c1] = posterior
+    r0, r1, c0, c1 = box
+    full[:, r0:r1, c0:c1] = correction.parts[0]
+    ks, rs, cs, kept = correction.kept
+    full[ks, rs, cs] = kept
     np.testing.assert_allclose(full, expected, rtol=0, atol=1e-14)
-    assert log_evidence == pytest.approx(expected_evidence, abs=1e-12)
-    assert left_out == 0.0
+    assert correction.log_evidence == pytest.approx(expected_evidence, abs=1e-12)
+    assert correction.left_out == 0.0
 
 
 def test_a_kidnapped_robot_is_found_on_the_lattice():
@@ -187,3 +194,43 @@ def test_the_windowed_steps_need_no_kernel_beyond_those_compiled_at_load():
     # Whatever ran before in this process: no version for a strided ('A') array.
     assert not [sig for name in compiled for sig in getattr(kernels, name).signatures
                 if "'A'" in str(sig)]
+
+
+def test_two_far_modes_are_two_windows_and_the_filter_stays_the_dense_one():
+    model = room(120, 130)
+    dense, windowed = tracked_pair(model, floor=1e-30)
+    # Two hypotheses 8 m apart: one window around each, not the box of both.
+    belief = 0.6 * grid.gaussian_prior(model, 1.5, 4.0, 0.3, np.diag([0.01, 0.01, 0.01])) \
+        + 0.4 * grid.gaussian_prior(model, 9.5, 12.0, 2.0, np.diag([0.01, 0.01, 0.01]))
+    for loc in (dense, windowed):
+        loc._hold(belief.copy(), window.full_box(model))
+    odometry = (0.0, 0.0, 0.0)
+    for step in range(6):
+        odometry = (odometry[0] + 0.1, odometry[1], odometry[2] + 0.05)
+        ranges, angles = scan()
+        for loc in (dense, windowed):
+            loc.on_odometry(odometry, (step + 1) * SECOND)
+            loc.update(ranges, angles, (step + 1) * SECOND)
+        assert_the_same_filter(windowed, dense)
+        assert len(windowed._boxes) == 2
+        rows = [r for box in windowed._boxes for r in box[:2]]
+        cols = [c for box in windowed._boxes for c in box[2:]]
+        both = (max(rows) - min(rows)) * (max(cols) - min(cols)) * model.heading_bins
+        assert windowed.window_states < 0.5 * both
+
+
+def test_support_boxes_group_near_cells_and_never_overlap():
+    footprint = np.zeros((60, 60), dtype=bool)
+    footprint[5:8, 5:9] = True
+    footprint[10, 12] = True                    # within JOIN_CELLS: the same window
+    footprint[40:45, 30:33] = True              # far: a window of its own
+    boxes = window.support_boxes(footprint)
+    assert sorted(boxes) == [(5, 11, 5, 13), (40, 45, 30, 33)]
+    assert window.support_boxes(np.zeros((4, 4), dtype=bool)) == []
+    # Too many separate groups: one box of all.
+    scattered = np.zeros((200, 200), dtype=bool)
+    scattered[::20, ::20] = True
+    assert window.support_boxes(scattered) == [(0, 181, 0, 181)]
+    # Boxes that overlap are joined, repeatedly: a chain of three becomes one.
+    assert window.disjoint([(0, 5, 0, 5), (4, 9, 8, 12), (8, 12, 0, 9)]) == [(0, 12, 0, 12)]
+    assert window.disjoint([(0, 5, 0, 5), (5, 9, 5, 9)]) == [(0, 5, 0, 5), (5, 9, 5, 9)]

@@ -19,11 +19,11 @@ as motion, and odometry is followed from the new pose. A step that fails
 (a scan every state rules out, an argument refused) leaves everything as it was.
 
 With ``belief_floor`` > 0 the states of less probability are dropped after each
-correction (their total is ``last_dropped``), and the steps run over the box of
+correction (their total is ``last_dropped``), and the steps run over the boxes of
 the states left, grown by what a prediction can reach (grid/window.py): a tracked
 robot's update then costs what its few square metres cost, not the building. The
 kidnap share then goes on a coarse lattice of one state in eight
-(``window.correct_with_kidnap``), scored with every scan. 0 keeps the dense filter.
+(``window.correct_boxes``), scored with every scan. 0 keeps the dense filter.
 
 Each method checks what it is given (a pose of three finite numbers, a scan of
 readings as ``steps.check_scan`` says, a stamp that is an integer) and raises
@@ -101,8 +101,9 @@ class GridLocalization:
         self._floor = belief_floor
         self._free_states = int(model.free.sum()) * model.heading_bins
         self.belief: FloatArray = grid.uniform_over_free(model)
-        #: The box of the states with probability (the whole grid with belief_floor 0).
-        self._box = window.full_box(model)
+        #: Disjoint boxes holding every state with probability (the whole grid with
+        #: belief_floor 0): the windows the steps run over.
+        self._boxes: list[window.Box] = [window.full_box(model)]
         self.log_evidence = float("nan")
         #: The probability belief_floor dropped at the last update.
         self.last_dropped = 0.0
@@ -125,23 +126,39 @@ class GridLocalization:
         self._hold(prior, window.full_box(self.model))
 
     def _hold(self, belief: FloatArray, box: window.Box) -> None:
-        """Take ``belief``, the window ``box``'s (zero outside it), as the belief: with
-        belief_floor > 0 without its states below the floor, and their box noted."""
-        belief, self.last_dropped = window.drop_below(belief, self._floor)
-        if box == window.full_box(self.model):
-            self.belief = belief
-        else:
-            r0, r1, c0, c1 = self._box
+        """Take ``belief`` over the whole grid (``box`` the full box) as the belief: with
+        belief_floor > 0 without its states below the floor, and their windows noted."""
+        assert box == window.full_box(self.model)
+        self.belief, self.last_dropped = window.drop_below(belief, self._floor)
+        self._boxes = window.support_boxes(np.any(self.belief, axis=0)) \
+            if self._floor > 0 else [box]
+
+    def _hold_windows(self, correction: window.Correction) -> None:
+        """Take a windowed correction's posterior as the belief, without its states below
+        the floor (at most floor x states, noted in ``last_dropped``), and note the
+        windows of what is left."""
+        parts, (ks, rs, cs, kept) = correction.parts, correction.kept
+        top = max(max(float(part.max()) for part in parts), float(kept.max(initial=0.0)))
+        threshold = min(self._floor, top)    # the largest state is never dropped
+        dropped = 0.0
+        for part in parts:
+            small = part < threshold
+            dropped += float(np.sum(part, where=small))
+            part[small] = 0.0
+        small = kept < threshold
+        dropped += float(kept[small].sum())
+        ks, rs, cs, kept = ks[~small], rs[~small], cs[~small], kept[~small]
+        remaining = sum(float(part.sum()) for part in parts) + float(kept.sum())
+        for r0, r1, c0, c1 in self._boxes:
             self.belief[:, r0:r1, c0:c1] = 0.0
-            r0, r1, c0, c1 = box
-            self.belief[:, r0:r1, c0:c1] = belief
-        if self._floor > 0:
-            support = window.support_box(belief)
-            assert support is not None   # drop_below keeps the largest state
-            r0, _, c0, _ = box
-            self._box = (r0 + support[0], r0 + support[1], c0 + support[2], c0 + support[3])
-        else:
-            self._box = box
+        footprint = np.zeros(self.model.free.shape, dtype=bool)
+        for part, (r0, r1, c0, c1) in zip(parts, correction.boxes):
+            self.belief[:, r0:r1, c0:c1] = part / remaining
+            footprint[r0:r1, c0:c1] = part.any(axis=0)
+        self.belief[ks, rs, cs] = kept / remaining
+        footprint[rs, cs] = True
+        self._boxes = window.support_boxes(footprint)
+        self.last_dropped = dropped + correction.left_out
 
     def on_odometry(self, pose: Pose, stamp_ns: int | None = None) -> bool:
         """Follow odometry; False when the step was a jump (not taken as motion)."""
@@ -201,39 +218,58 @@ class GridLocalization:
             raise InvalidInputError(
                 "stamp_ns: no odometry yet: the motion since the last update is unknown")
         delta = None if self._reference is None else grid.odometry_delta(self._reference, pose)
-        box = self._box if delta is None else window.grown_box(self._box, self.model, delta,
-                                                               self.noise)
-        dense_kidnap = self._kidnap > 0.0 and self._floor == 0.0
-        if dense_kidnap:
-            box = window.full_box(self.model)
-        model, belief = self._window(box)
-        if delta is not None:
-            belief = grid._predict(belief, model, delta, self.noise)
         weight = 1.0 if self._independent_beams is None else \
             grid.scan_weight(self._independent_beams, ranges.size)
-        left_out = 0.0
-        if self._kidnap > 0.0 and not dense_kidnap:
-            posterior, box, log_evidence, left_out = window.correct_with_kidnap(
-                belief, self.model, box, ranges, angles, weight, self._kidnap, self._floor)
+        if self._floor > 0.0:
+            correction = self._windowed_step(ranges, angles, delta, weight)
+            self._hold_windows(correction)
+            log_evidence = correction.log_evidence
         else:
-            if dense_kidnap:
-                # The robot may have been carried anywhere: a little of the belief
-                # everywhere, so a kidnapped robot is found again by the scans alone.
-                belief = (1.0 - self._kidnap) * belief + \
-                    (self._kidnap / self._free_states) * model.free
-            posterior, log_evidence = grid._correct_scan(belief, self.model, ranges, angles,
-                                                         weight=weight, box=box)
-        self._hold(posterior, box)
-        self.last_dropped += left_out
+            posterior, log_evidence = self._dense_step(ranges, angles, delta, weight)
+            self._hold(posterior, window.full_box(self.model))
         self.log_evidence = log_evidence
         self._reference = pose
         self.updates += 1
 
+    def _dense_step(self, ranges: FloatArray, angles: FloatArray,
+                    delta: tuple[float, float, float] | None,
+                    weight: float) -> tuple[FloatArray, float]:
+        """The exact filter over the whole grid: posterior and log evidence."""
+        belief = self.belief
+        if delta is not None:
+            belief = grid._predict(belief, self.model, delta, self.noise)
+        if self._kidnap > 0.0:
+            # The robot may have been carried anywhere: a little of the belief everywhere,
+            # so a kidnapped robot is found again by the scans alone.
+            belief = (1.0 - self._kidnap) * belief + \
+                (self._kidnap / self._free_states) * self.model.free
+        return grid._correct_scan(belief, self.model, ranges, angles, weight=weight,
+                                  box=window.full_box(self.model))
+
+    def _windowed_step(self, ranges: FloatArray, angles: FloatArray,
+                       delta: tuple[float, float, float] | None,
+                       weight: float) -> window.Correction:
+        """The steps over the windows: each grown by what the motion reaches (those that
+        then overlap joined), predicted on its own and normalized together, then
+        corrected together (window.correct_boxes)."""
+        boxes = self._boxes if delta is None else window.disjoint(
+            [window.grown_box(box, self.model, delta, self.noise) for box in self._boxes])
+        priors = []
+        if delta is None:
+            priors = [self._window(box)[1] for box in boxes]
+        else:
+            spreads = [grid._spread(*self._window(box)[::-1], delta, self.noise)
+                       for box in boxes]
+            total = sum(left for _, left in spreads)
+            priors = [grid._normalized(spread, total) for spread, _ in spreads]
+        return window.correct_boxes(priors, boxes, self.model, ranges, angles, weight,
+                                    self._kidnap, self._floor)
+
     @property
     def window_states(self) -> int:
-        """The states the next update starts from: the belief's box, all headings."""
-        r0, r1, c0, c1 = self._box
-        return (r1 - r0) * (c1 - c0) * self.model.heading_bins
+        """The states the next update starts from: its windows', all headings."""
+        return sum((r1 - r0) * (c1 - c0) for r0, r1, c0, c1 in self._boxes) \
+            * self.model.heading_bins
 
     def _window(self, box: window.Box) -> tuple[grid.GridModel, FloatArray]:
         """The map and the belief within ``box`` (the belief a copy: the steps may write
@@ -244,24 +280,38 @@ class GridLocalization:
 
     def estimate(self, radius: float, angle: float) -> Estimate:
         """The most likely pose (steps.refined_pose of the most likely state), the
-        covariance around it, and the probability within
-        ``radius`` (m) and ``angle`` (rad) of it."""
+        covariance around it, and the probability within ``radius`` (m) and ``angle``
+        (rad) of it: sums over the windows."""
         radius, angle = check_non_negative("radius", radius), check_non_negative("angle", angle)
-        box, model = self._box, self.model
-        belief = window.window_of(self.belief, box)
+        model = self.model
+        windows = [(box, window.window_of(self.belief, box)) for box in self._boxes]
+        box, belief = max(windows, key=lambda pair: float(pair[1].max()))
         pose = grid._refined_pose(belief, model, grid._most_likely_state(belief), box)
-        return Estimate(pose, grid._covariance_around(belief, model, pose, box),
-                        grid._mass_near(belief, model, pose, radius, angle, box))
+        if len(windows) == 1:
+            return Estimate(pose, grid._covariance_around(belief, model, pose, box),
+                            grid._mass_near(belief, model, pose, radius, angle, box))
+        # Each window's second moment about the pose carries the grid's quantization
+        # variance once: counted once in the sum.
+        quantization = np.diag([model.resolution ** 2 / 12] * 2 + [model.bin_width ** 2 / 12])
+        covariance = quantization + sum(
+            grid._covariance_around(part, model, pose, where) - quantization
+            for where, part in windows)
+        quality = sum(grid._mass_near(part, model, pose, radius, angle, where)
+                      for where, part in windows)
+        return Estimate(pose, covariance, float(quality))
 
     def belief_map(self) -> np.ndarray:
-        belief = window.window_of(self.belief, self._box)
-        r0, r1, c0, c1 = self._box
+        windows = [(box, window.window_of(self.belief, box)) for box in self._boxes]
+        peak = max(float(part.max()) for _, part in windows)
         picture = np.zeros(self.model.free.shape, dtype=np.int8)
-        picture[r0:r1, c0:c1] = grid._belief_map(belief)
+        for (r0, r1, c0, c1), part in windows:
+            top = part.max(axis=0)
+            picture[r0:r1, c0:c1] = np.rint(100.0 * top / peak).astype(np.int8)
         return picture
 
     def entropy_bits(self) -> float:
-        return grid._entropy_bits(window.window_of(self.belief, self._box))
+        return float(sum(grid._entropy_bits(window.window_of(self.belief, box))
+                         for box in self._boxes)) + 0.0
 
 
 def _stamp(stamp_ns: int | None) -> int | None:

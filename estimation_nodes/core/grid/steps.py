@@ -458,9 +458,16 @@ def predict(belief: FloatArray, model: GridModel, delta: tuple[float, float, flo
 def _predict(belief: FloatArray, model: GridModel, delta: tuple[float, float, float],
              noise: OdometryNoise, compiled: bool = True) -> FloatArray:
     """``predict`` of arguments already checked."""
+    return _normalized(*_spread(belief, model, delta, noise, compiled))
+
+
+def _spread(belief: FloatArray, model: GridModel, delta: tuple[float, float, float],
+            noise: OdometryNoise, compiled: bool = True) -> tuple[FloatArray, float]:
+    """The prediction before it is normalized, and its sum (the probability left on free
+    cells): a belief held in several windows (grid/window.py) is normalized over all."""
     kernels = compiled_kernels(belief.size, compiled)
     if kernels is not None:
-        return _predict_compiled(kernels, belief, model, delta, noise)
+        return _spread_compiled(kernels, belief, model, delta, noise)
     rot1, trans, rot2 = delta
     shift_rows, shift_cols = _bounded_shifts(model, rot1, trans)
     shifted = np.empty_like(belief)
@@ -473,11 +480,12 @@ def _predict(belief: FloatArray, model: GridModel, delta: tuple[float, float, fl
     spread = _blur(spread, _reaching_taps(sigma_cells, rows), axis=1)
     spread = _blur(spread, _reaching_taps(sigma_cells, cols), axis=2)
     spread *= model.free[None, :, :]
-    return _normalized(spread, float(spread.sum()))
+    return spread, float(spread.sum())
 
 
-def _predict_compiled(kernels: ModuleType, belief: FloatArray, model: GridModel,
-                      delta: tuple[float, float, float], noise: OdometryNoise) -> FloatArray:
+def _spread_compiled(kernels: ModuleType, belief: FloatArray, model: GridModel,
+                     delta: tuple[float, float, float],
+                     noise: OdometryNoise) -> tuple[FloatArray, float]:
     rot1, trans, rot2 = delta
     shift_rows, shift_cols = _bounded_shifts(model, rot1, trans)
     sigma_cells, sigma_bins = _motion_noise(delta, noise, model)
@@ -494,7 +502,7 @@ def _predict_compiled(kernels: ModuleType, belief: FloatArray, model: GridModel,
         first, second = second, first
     total = kernels.blur_cols_masked(first, _reaching_taps(sigma_cells, cols), model.free,
                                      second)
-    return _normalized(second, total)
+    return second, float(total)
 
 
 def _normalized(belief: FloatArray, total: float) -> FloatArray:

@@ -4,10 +4,14 @@ A tracked robot's belief is zero on all but a few square metres of a building,
 and a step never moves probability further than its motion and its noise
 reach. So the filter runs over a window of (rows, columns), all headings:
 
-- ``support_box``: the smallest box holding every state of nonzero probability;
-- ``grown_box``: that box after a prediction: grown by the motion's reach (the
+- ``support_boxes``: disjoint boxes holding every state of nonzero probability,
+  one per group of cells near each other: a second hypothesis across the
+  building is a second small window, not one window over the building;
+- ``grown_box``: a box after a prediction: grown by the motion's reach (the
   longest shift of any heading layer, plus the bilinear split's cell) and the
-  blur's taps either side, cut to the grid;
+  blur's taps either side, cut to the grid; grown boxes that overlap are joined
+  (``disjoint``), so each window's prediction gets all that can reach it, and
+  the predictions are normalized together;
 - the prediction runs on the window's crop of the belief and the map
   (``crop``), the correction scores the scan over the window only
   (``steps._scan_log_likelihood(..., box=)``).
@@ -28,14 +32,18 @@ approximation: at most floor x states of probability per update, reported.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
 
 from estimation_nodes.core.grid import steps as grid
 from estimation_nodes.core.validation import FloatArray
 
 #: (first row, row past the last, first column, column past the last).
 Box = tuple[int, int, int, int]
+#: Single states: arrays of their headings, rows, columns and probabilities.
+States = tuple[np.ndarray, np.ndarray, np.ndarray, FloatArray]
 
 
 def full_box(model: grid.GridModel) -> Box:
@@ -52,6 +60,61 @@ def support_box(belief: FloatArray) -> Box | None:
         return None
     cols = np.flatnonzero(layer.any(axis=0))
     return int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+
+
+#: Supports closer than this many cells share a window: a window of its own costs a pass
+#: of each step, worth it only for a mode apart from the rest.
+JOIN_CELLS = 8
+#: More separate supports than this are held in one window (their bounding box).
+MAX_WINDOWS = 12
+
+
+def support_boxes(footprint: np.ndarray) -> list[Box]:
+    """Disjoint boxes holding every True cell of ``footprint`` (H, W): one per group of
+    cells within JOIN_CELLS of each other (at most MAX_WINDOWS, else one box of all);
+    empty when there is none."""
+    if not footprint.any():
+        return []
+    joined = ndimage.binary_dilation(footprint, iterations=JOIN_CELLS // 2)
+    labels, count = ndimage.label(joined, structure=np.ones((3, 3)))
+    if count > MAX_WINDOWS:
+        box = support_box(footprint[None])
+        assert box is not None
+        return [box]
+    boxes = []
+    for found in ndimage.find_objects(labels * footprint):
+        if found is not None:
+            rows, cols = found
+            boxes.append((rows.start, rows.stop, cols.start, cols.stop))
+    return disjoint(boxes)
+
+
+def disjoint(boxes: list[Box]) -> list[Box]:
+    """``boxes`` with every two that overlap replaced by the box of both, until none
+    does: a state is then in one window only, and a window's steps see all the
+    probability that can reach it."""
+    boxes = list(boxes)
+    merged = True
+    while merged:
+        merged = False
+        for a in range(len(boxes)):
+            for b in range(a + 1, len(boxes)):
+                if _overlap(boxes[a], boxes[b]):
+                    boxes[a] = _union(boxes[a], boxes[b])
+                    del boxes[b]
+                    merged = True
+                    break
+            if merged:
+                break
+    return boxes
+
+
+def _overlap(a: Box, b: Box) -> bool:
+    return a[0] < b[1] and b[0] < a[1] and a[2] < b[3] and b[2] < a[3]
+
+
+def _union(a: Box, b: Box) -> Box:
+    return min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3])
 
 
 def grown_box(box: Box, model: grid.GridModel, delta: tuple[float, float, float],
@@ -108,35 +171,42 @@ def drop_below(belief: FloatArray, floor: float) -> tuple[FloatArray, float]:
 KIDNAP_STEP = 2
 
 
-def correct_with_kidnap(belief: FloatArray, model: grid.GridModel, box: Box,
-                        ranges: FloatArray, angles: FloatArray, weight: float, share: float,
-                        floor: float, compiled: bool = True
-                        ) -> tuple[FloatArray, Box, float, float]:
-    """The correction of the prior (1 - share) x ``belief`` (the window ``box``'s) plus
-    ``share`` spread evenly over the free states of a coarse lattice (every
-    KIDNAP_STEP-th heading, row and column, a fraction 1 / KIDNAP_STEP^3 of the states),
-    so that a kidnapped robot is found by its scans at the cost of scoring the lattice,
-    not every state. (The next prediction's blur spreads what the lattice finds.)
+def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridModel,
+                  ranges: FloatArray, angles: FloatArray, weight: float, share: float,
+                  floor: float, compiled: bool = True) -> Correction:
+    """The correction of a belief held in disjoint ``boxes`` (``priors``: each box's part,
+    zero elsewhere). With ``share`` > 0 the prior is (1 - share) x that belief plus
+    ``share`` spread evenly over the free states of a coarse lattice (every KIDNAP_STEP-th
+    heading, row and column, a fraction 1 / KIDNAP_STEP^3 of the states), so that a
+    kidnapped robot is found by its scans at the cost of scoring the lattice, not every
+    state. (The next prediction's blur spreads what the lattice finds.)
 
-    Returns the posterior over the box that holds the window and every lattice state of
-    probability ``floor`` or more, that box, the log evidence, and the probability of
-    the lattice states left outside it (all below the floor)."""
+    The lattice's posterior within the boxes joins theirs; outside them its states of
+    probability ``floor`` or more are kept (``Correction.kept``) and the rest, all below
+    the floor, left out (``Correction.left_out``, the whole renormalized over the rest).
+    """
     step = KIDNAP_STEP
     lattice_free = model.free[::step, ::step]
     free_states = int(lattice_free.sum()) * -(-model.heading_bins // step)
-    window_ll = grid._scan_log_likelihood(model, ranges, angles, compiled, box)
-    if free_states == 0:
-        share, lattice_ll = 0.0, None
-    else:
+    lls = [grid._scan_log_likelihood(model, ranges, angles, compiled, box) for box in boxes]
+    lattice_ll = None
+    if share > 0.0 and free_states > 0:
         lattice_ll = grid._scan_log_likelihood_strided(model, ranges, angles, step, compiled)
-    if weight != 1.0:
-        np.multiply(window_ll, weight, out=window_ll)
-        if lattice_ll is not None:
-            np.multiply(lattice_ll, weight, out=lattice_ll)
-    peak = _peak(window_ll, belief > 0, lattice_ll, lattice_free)
-    weighted, _ = grid._weighted(window_ll, peak, belief)
-    weighted *= 1.0 - share
-    total = float(weighted.sum())
+    for ll in [*lls, *([lattice_ll] if lattice_ll is not None else [])]:
+        if weight != 1.0:
+            np.multiply(ll, weight, out=ll)
+    peak = max(float(ll[prior > 0].max(initial=-math.inf)) for ll, prior in zip(lls, priors))
+    if lattice_ll is not None:
+        peak = max(peak, float(lattice_ll[:, lattice_free].max(initial=-math.inf)))
+    if not math.isfinite(peak):
+        raise grid.ZeroEvidenceError("every state with probability rules the scan out")
+    parts = []
+    for ll, prior in zip(lls, priors):
+        weighted, _ = grid._weighted(ll, peak, prior)
+        if share > 0.0:
+            weighted *= 1.0 - share
+        parts.append(weighted)
+    total = sum(float(part.sum()) for part in parts)
     if lattice_ll is not None:
         lattice, _ = grid._weighted(lattice_ll, peak, lattice_free)
         lattice *= share / free_states
@@ -144,45 +214,53 @@ def correct_with_kidnap(belief: FloatArray, model: grid.GridModel, box: Box,
     if not total > 0.0:
         raise grid.ZeroEvidenceError("every state with probability rules the scan out")
     log_evidence = peak + math.log(total)
-    weighted /= total
+    for part in parts:
+        part /= total
     if lattice_ll is None:
-        return weighted, box, log_evidence, 0.0
+        return Correction(parts, boxes, _no_states(), log_evidence, 0.0)
     lattice /= total
-    merged, merged_box, left_out = _merged(weighted, box, lattice, floor)
-    return merged, merged_box, log_evidence, left_out
-
-
-def _peak(window_ll: FloatArray, possible: np.ndarray, lattice_ll: FloatArray | None,
-          lattice_free: np.ndarray) -> float:
-    """The largest log likelihood among the states the prior allows, so that the most
-    likely of them never underflows."""
-    peak = float(window_ll[possible].max(initial=-math.inf))
-    if lattice_ll is not None:
-        peak = max(peak, float(lattice_ll[:, lattice_free].max(initial=-math.inf)))
-    if not math.isfinite(peak):
-        raise grid.ZeroEvidenceError("every state with probability rules the scan out")
-    return peak
-
-
-def _merged(weighted: FloatArray, box: Box, lattice: FloatArray,
-            floor: float) -> tuple[FloatArray, Box, float]:
-    """The window's posterior and the lattice's over the box holding the window and the
-    lattice states of at least ``floor``; and the lattice's probability outside it."""
-    step = KIDNAP_STEP
-    kept = np.argwhere(lattice >= floor)
-    r0, r1, c0, c1 = box
-    if kept.size:
-        r0, r1 = min(r0, step * int(kept[:, 1].min())), max(r1, step * int(kept[:, 1].max()) + 1)
-        c0, c1 = min(c0, step * int(kept[:, 2].min())), max(c1, step * int(kept[:, 2].max()) + 1)
-    merged = np.zeros((weighted.shape[0], r1 - r0, c1 - c0))
-    b0, b1, d0, d1 = box
-    merged[:, b0 - r0:b1 - r0, d0 - c0:d1 - c0] = weighted
-    # The lattice rows and columns within the merged box, and where they fall in it.
-    i0, i1 = -(-r0 // step), -(-r1 // step)
-    j0, j1 = -(-c0 // step), -(-c1 // step)
-    inside = lattice[:, i0:i1, j0:j1]
-    merged[::step, step * i0 - r0::step, step * j0 - c0::step] += inside
-    left_out = max(float(lattice.sum()) - float(inside.sum()), 0.0)
+    kept, left_out = _lattice_into(parts, boxes, lattice, floor)
     if left_out > 0.0:
-        merged /= float(merged.sum())
-    return merged, (r0, r1, c0, c1), left_out
+        remaining = sum(float(part.sum()) for part in parts) + float(kept[3].sum())
+        for part in parts:
+            part /= remaining
+        kept = (kept[0], kept[1], kept[2], kept[3] / remaining)
+    return Correction(parts, boxes, kept, log_evidence, left_out)
+
+
+@dataclass
+class Correction:
+    """A posterior held in windows: each box's part, and single states outside them
+    (``kept``: arrays of headings, rows, columns and probabilities)."""
+
+    parts: list[FloatArray]
+    boxes: list[Box]
+    kept: States
+    log_evidence: float
+    #: The probability of the lattice states left out (each below the floor).
+    left_out: float
+
+
+def _no_states() -> States:
+    empty = np.zeros(0, dtype=np.int64)
+    return empty, empty, empty, np.zeros(0)
+
+
+def _lattice_into(parts: list[FloatArray], boxes: list[Box], lattice: FloatArray,
+                  floor: float) -> tuple[States, float]:
+    """Add the lattice's posterior within each box to that box's part; of the rest, the
+    states of ``floor`` or more (headings, rows, columns, probabilities) and the
+    probability of those left out."""
+    step = KIDNAP_STEP
+    covered = np.zeros(lattice.shape[1:], dtype=bool)
+    for part, (r0, r1, c0, c1) in zip(parts, boxes):
+        # The lattice rows and columns within the box, and where they fall in it.
+        i0, i1 = -(-r0 // step), -(-r1 // step)
+        j0, j1 = -(-c0 // step), -(-c1 // step)
+        part[::step, step * i0 - r0::step, step * j0 - c0::step] += lattice[:, i0:i1, j0:j1]
+        covered[i0:i1, j0:j1] = True
+    outside = lattice * ~covered[None]
+    k, i, j = np.nonzero(outside >= floor) if floor > 0 else np.nonzero(outside)
+    values = outside[k, i, j]
+    left_out = max(float(outside.sum()) - float(values.sum()), 0.0)
+    return (step * k, step * i, step * j, values), left_out
