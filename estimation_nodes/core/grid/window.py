@@ -197,7 +197,8 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridMo
             np.multiply(ll, weight, out=ll)
     peak = max(float(ll[prior > 0].max(initial=-math.inf)) for ll, prior in zip(lls, priors))
     if lattice_ll is not None:
-        peak = max(peak, float(lattice_ll[:, lattice_free].max(initial=-math.inf)))
+        peak = max(peak, float(np.max(lattice_ll, where=lattice_free[None],
+                                      initial=-math.inf)))
     if not math.isfinite(peak):
         raise grid.ZeroEvidenceError("every state with probability rules the scan out")
     parts = []
@@ -253,14 +254,20 @@ def _lattice_into(parts: list[FloatArray], boxes: list[Box], lattice: FloatArray
     probability of those left out."""
     step = KIDNAP_STEP
     covered = np.zeros(lattice.shape[1:], dtype=bool)
+    inside = 0.0
     for part, (r0, r1, c0, c1) in zip(parts, boxes):
         # The lattice rows and columns within the box, and where they fall in it.
         i0, i1 = -(-r0 // step), -(-r1 // step)
         j0, j1 = -(-c0 // step), -(-c1 // step)
-        part[::step, step * i0 - r0::step, step * j0 - c0::step] += lattice[:, i0:i1, j0:j1]
+        within = lattice[:, i0:i1, j0:j1]
+        part[::step, step * i0 - r0::step, step * j0 - c0::step] += within
+        inside += float(within.sum())
         covered[i0:i1, j0:j1] = True
-    outside = lattice * ~covered[None]
-    k, i, j = np.nonzero(outside >= floor) if floor > 0 else np.nonzero(outside)
-    values = outside[k, i, j]
-    left_out = max(float(outside.sum()) - float(values.sum()), 0.0)
+    # Passes over the lattice (an eighth of the building's states) kept to two: a sum and
+    # a comparison.
+    chosen = lattice >= floor if floor > 0 else lattice > 0
+    chosen &= ~covered[None]
+    k, i, j = np.nonzero(chosen)
+    values = lattice[k, i, j]
+    left_out = max(float(lattice.sum()) - inside - float(values.sum()), 0.0)
     return (step * k, step * i, step * j, values), left_out
