@@ -128,10 +128,12 @@ def end_pid(pid: int, grace: float = 5.0) -> None:
 
 @pytest.fixture
 def daemon_guard(domain_id):
-    """After the test: no `ros2 daemon` of the test's domain may be running; one that is
-    is ended by its pid, and the test fails."""
+    """After the test: no `ros2 daemon` it started in its domain may be running; one that
+    is is ended by its pid, and the test fails. A daemon that was there before (another
+    program's, on the same domain id) is not the test's: left alone."""
+    before = set(daemon_pids(domain_id))
     yield
-    daemons = daemon_pids(domain_id)
+    daemons = [pid for pid in daemon_pids(domain_id) if pid not in before]
     for pid in daemons:
         end_pid(pid)
     assert not daemons, f"a ros2 daemon was started in domain {domain_id}: pids {daemons}"

@@ -811,7 +811,7 @@ def test_grid_models(kind, data):
 
 GRID_HELPERS = ("gaussian_prior", "covariance_around", "mass_near", "pose_of", "odometry_delta",
                 "most_likely_state", "belief_map", "entropy_bits", "correct", "layer_shifts",
-                "motion_noise", "gaussian_taps", "uniform_over_free")
+                "motion_noise", "gaussian_taps", "uniform_over_free", "refined_pose")
 
 
 @pytest.mark.parametrize("kind", KINDS)
@@ -841,6 +841,8 @@ def test_grid_helpers(grid_path, kind, data):
                          "model": model},
         "gaussian_taps": {"sigma": float(rng.uniform(0, 5))},
         "uniform_over_free": {"model": model},
+        "refined_pose": {"belief": belief, "model": model,
+                         "state": grid.most_likely_state(belief)},
     }[function]
     bad = choose(data, arguments)
     value = arguments[bad]
@@ -892,6 +894,13 @@ def test_grid_helpers(grid_path, kind, data):
             assert result.size % 2 == 1 and result.sum() == pytest.approx(1.0)
         elif function == "motion_noise":
             assert min(result) >= 0
+        elif function == "refined_pose":
+            k, i, j = arguments["state"]
+            # Within a cell and a bin of the state's centre, and finite.
+            assert abs(result[0] - xs[j]) <= model.resolution + 1e-12
+            assert abs(result[1] - ys[i]) <= model.resolution + 1e-12
+            assert abs(math.remainder(result[2] - k * model.bin_width, 2 * math.pi)) \
+                <= model.bin_width + 1e-12
 
     obeys(lambda: getattr(grid, function)(**arguments), names, right)
     assert_unchanged(arguments, copies)
