@@ -11,7 +11,7 @@ from std_msgs.msg import Float64, Float64MultiArray, Int32, Int64, String
 
 from estimation_nodes.core.tiles import histogram
 from estimation_nodes.core.tiles.models import HistogramModel
-from estimation_nodes.nodes.qos import INPUT_QOS
+from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.tools.replay.estimator import align
 from tests.conftest import SCENARIOS, spin_until
 from tests.graph.graph_tools import (
@@ -63,7 +63,11 @@ def settled_beliefs(seen, first: int) -> tuple[list, list]:
 
 def test_sensor_restarted_mid_run_estimator_keeps_localizing(
         processes, executor, collector_factory):
-    seen = collector_factory({"belief": Float64MultiArray, "true_position": Int64,
+    # The truth as the sensor keeps it (transient local, 100): the restarted sensor's first
+    # truths reach us even when we match its publisher after they went out (discovery of a
+    # new process takes 0.3 to 3 s here; a volatile reader lost them in a plain run).
+    seen = collector_factory({"belief": Float64MultiArray,
+                              "true_position": (Int64, latched_qos(100)),
                               "/diagnostics": (DiagnosticArray, 10)})
     # start_delay also applies when the commander resumes: time for the new sensor's
     # publishers to be discovered, so its readings are not held and sent late.
