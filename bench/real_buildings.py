@@ -80,7 +80,9 @@ def building_map(log: carmen.CarmenLog):
 
 
 def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
-        belief_floor: float, profile: bool) -> dict:
+        belief_floor: float, profile: bool, global_start: bool = False) -> dict:
+    """The localizer on the log's first ``scans`` scans, from the first corrected pose
+    (or, ``global_start``, from no pose: uniform over the free cells)."""
     log = carmen.read_log(log_path)
     occupancy = building_map(log)
     values = spec_defaults(GRID_LOCALIZER_SPECS)
@@ -90,12 +92,13 @@ def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
     model = grid_model(occupancy, resolution, heading_bins, settings.sensor,
                        settings.max_states)
     localization = settings.localization(model)
-    first = log.scans[0].pose
-    localization.set_prior(first, np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2]))
+    if not global_start:
+        localization.set_prior(log.scans[0].pose,
+                               np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2]))
     grid.compiled_kernels(grid.COMPILED_MIN_STATES)
     odometry = iter(log.odometry)
     pending = next(odometry, None)
-    times, errors, headings, stamps = [], [], [], []
+    times, errors, headings, stamps, qualities = [], [], [], [], []
     profiler = _profiler(profile)
     for scan in log.scans[:scans]:
         stamp = _ns(scan.t)
@@ -117,24 +120,34 @@ def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
             profiler.disable()
         times.append(time.perf_counter() - started)
         stamps.append(stamp)
-        pose = localization.estimate(settings.quality_radius, settings.quality_angle).pose
+        estimate = localization.estimate(settings.quality_radius, settings.quality_angle)
+        pose = estimate.pose
+        qualities.append(estimate.quality)
         errors.append(math.hypot(pose[0] - scan.pose[0], pose[1] - scan.pose[1]))
         headings.append(abs(math.remainder(pose[2] - scan.pose[2], 2 * math.pi)))
     if profiler:
         _print_profile(profiler)
     return {"cells": list(model.free.shape), "states": int(np.prod(model.shape)),
             "free_states": int(model.free.sum()) * heading_bins, "stamps_ns": stamps,
-            **_scores(times, errors, headings)}
+            "qualities": qualities, **_scores(times, errors, headings)}
 
 
-def run_amcl(log_path: Path, stamps_ns: list[int]) -> dict:
+def run_amcl(log_path: Path, stamps_ns: list[int], global_start: bool = False) -> dict:
     """AMCL on the scans taken at ``stamps_ns``, each with the raw odometry pose at or
-    before its time, from the same prior as the localizer."""
+    before its time, from the same prior as the localizer; ``global_start``: from the
+    map's centre with a covariance as wide as the map (the bindings cannot spread the
+    particles uniformly over the free cells, as Nav2's global localization does)."""
     log = carmen.read_log(log_path)
     occupancy = building_map(log)
-    first = log.scans[0].pose
-    baseline = amcl_baseline.AmclBaseline(
-        occupancy, first, np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2]))
+    if global_start:
+        rows, cols = occupancy.cells.shape
+        half_w, half_h = cols * occupancy.resolution / 2, rows * occupancy.resolution / 2
+        prior = (occupancy.origin[0] + half_w, occupancy.origin[1] + half_h, 0.0)
+        covariance = np.diag([half_w ** 2, half_h ** 2, math.pi ** 2])
+    else:
+        prior = log.scans[0].pose
+        covariance = np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2])
+    baseline = amcl_baseline.AmclBaseline(occupancy, prior, covariance)
     taken = set(stamps_ns)
     odometry, index = log.odometry, 0
     times, errors, headings = [], [], []
@@ -149,12 +162,14 @@ def run_amcl(log_path: Path, stamps_ns: list[int]) -> dict:
         times.append(time.perf_counter() - started)
         errors.append(math.hypot(pose[0] - scan.pose[0], pose[1] - scan.pose[1]))
         headings.append(abs(math.remainder(pose[2] - scan.pose[2], 2 * math.pi)))
-    return {"cells": list(occupancy.cells.shape), **_scores(times, errors, headings)}
+    return {"cells": list(occupancy.cells.shape), "qualities": None,
+            **_scores(times, errors, headings)}
 
 
 def _scores(times: list[float], errors: list[float], headings: list[float]) -> dict:
     errors_a, headings_a = np.array(errors), np.array(headings)
     return {"updates": len(times), "times_ms": [1e3 * t for t in times],
+            "errors_m": errors, "headings_rad": headings,
             "near": float(np.mean((errors_a <= NEAR_M) & (headings_a <= NEAR_RAD))),
             "median_error_m": float(np.median(errors_a)),
             "median_error_deg": math.degrees(float(np.median(headings_a))),
@@ -194,15 +209,11 @@ def main() -> None:
     parser.add_argument("--no-amcl", action="store_true", help="leave the AMCL baseline out")
     parser.add_argument("--one", help=argparse.SUPPRESS)   # a child's run, as JSON
     parser.add_argument("--stamps", help=argparse.SUPPRESS)   # the AMCL child's scans
+    parser.add_argument("--global-start", action="store_true",
+                        help="no initial pose: global localization from a uniform belief")
     args = parser.parse_args()
     if args.one:
-        log, floor = args.one.split(",")
-        if floor == "amcl":
-            stamps = json.loads(Path(args.stamps).read_text())
-            print(json.dumps(run_amcl(resolve(log), stamps)))
-        else:
-            print(json.dumps(run(resolve(log), args.scans, args.resolution,
-                                 args.heading_bins, float(floor), args.profile)))
+        print(json.dumps(run_one(args)))
         return
     logs = args.log or ["intel", "aces"]
     missing = [name for name in logs if not resolve(name).exists()]
@@ -216,12 +227,22 @@ def main() -> None:
               file=sys.stderr)
     rows = []
     for name in logs:
-        results = [(f"grid, floor {floor:g}", _child(args, name, floor)) for floor in floors]
+        results = [(f"grid, floor {floor:g}", grid_child(args, name, floor)) for floor in floors]
         if with_amcl:
-            results.append(("AMCL", _amcl_child(args, name, results[0][1]["stamps_ns"])))
+            results.append(("AMCL", amcl_child(args, name, results[0][1]["stamps_ns"])))
         amcl_ms = float(np.median(results[-1][1]["times_ms"])) if with_amcl else None
         rows += [_row(name, label, result, amcl_ms) for label, result in results]
         print(table(HEADER, rows), flush=True)
+
+
+def run_one(args: argparse.Namespace) -> dict:
+    """A child's run (``--one LOG,FLOOR`` or ``--one LOG,amcl``)."""
+    log, floor = args.one.split(",")
+    if floor == "amcl":
+        stamps = json.loads(Path(args.stamps).read_text())
+        return run_amcl(resolve(log), stamps, args.global_start)
+    return run(resolve(log), args.scans, args.resolution, args.heading_bins, float(floor),
+               args.profile, args.global_start)
 
 
 HEADER = ["log", "filter", "cells", "states", "free states", "updates",
@@ -229,19 +250,21 @@ HEADER = ["log", "filter", "cells", "states", "free states", "updates",
           "within 0.2 m, 5 deg", "median error"]
 
 
-def _child(args: argparse.Namespace, name: str, floor: float) -> dict:
+def grid_child(args: argparse.Namespace, name: str, floor: float) -> dict:
     command = [sys.executable, __file__, "--one", f"{name},{floor!r}", "--scans",
                str(args.scans), "--resolution", str(args.resolution), "--heading-bins",
-               str(args.heading_bins)] + (["--profile"] if args.profile else [])
+               str(args.heading_bins)] + (["--profile"] if args.profile else []) \
+        + (["--global-start"] if getattr(args, "global_start", False) else [])
     done = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def _amcl_child(args: argparse.Namespace, name: str, stamps_ns: list[int]) -> dict:
+def amcl_child(args: argparse.Namespace, name: str, stamps_ns: list[int]) -> dict:
     with tempfile.NamedTemporaryFile("w", suffix=".json") as stamps:
         json.dump(stamps_ns, stamps)
         stamps.flush()
-        command = [sys.executable, __file__, "--one", f"{name},amcl", "--stamps", stamps.name]
+        command = [sys.executable, __file__, "--one", f"{name},amcl", "--stamps", stamps.name] \
+            + (["--global-start"] if getattr(args, "global_start", False) else [])
         done = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
