@@ -1,4 +1,5 @@
-"""Orientation conventions shared by the nodes that publish poses (numpy only)."""
+"""Orientation conventions shared by the nodes that publish poses, and planar pose
+composition (numpy only)."""
 
 from __future__ import annotations
 
@@ -17,6 +18,25 @@ def quaternion_from_rpy(
             cr * sp * cy + sr * cp * sy,
             cr * cp * sy - sr * sp * cy,
             cr * cp * cy + sr * sp * sy)
+
+
+def compose(a: tuple[float, float, float],
+            b: tuple[float, float, float]) -> tuple[float, float, float]:
+    """a (+) b: pose b, given in a's frame, in a's parent frame."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], _wrap(a[2] + b[2]))
+
+
+def relative(a: tuple[float, float, float],
+             b: tuple[float, float, float]) -> tuple[float, float, float]:
+    """a^-1 (+) b: pose b in a's frame."""
+    c, s = math.cos(a[2]), math.sin(a[2])
+    dx, dy = b[0] - a[0], b[1] - a[1]
+    return (c * dx + s * dy, -s * dx + c * dy, _wrap(b[2] - a[2]))
+
+
+def _wrap(angle: float) -> float:
+    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def yaw_from_quaternion(x: float, y: float, z: float, w: float) -> float:

@@ -64,7 +64,8 @@ def run_main(module: str, interrupted_code: int) -> None:
     if interrupted:
         signal.signal(signal.SIGINT, signal.SIG_IGN)   # the end has begun
         sys.exit(interrupted_code)
-    # From here on the program's own handling: KeyboardInterrupt, then rclpy's handler.
+    # From here on the program's own handling (KeyboardInterrupt, or a noted Ctrl-C:
+    # nodes/process.py).
     signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         main()

@@ -203,7 +203,7 @@ def test_two_far_modes_are_two_windows_and_the_filter_stays_the_dense_one():
     belief = 0.6 * grid.gaussian_prior(model, 1.5, 4.0, 0.3, np.diag([0.01, 0.01, 0.01])) \
         + 0.4 * grid.gaussian_prior(model, 9.5, 12.0, 2.0, np.diag([0.01, 0.01, 0.01]))
     for loc in (dense, windowed):
-        loc._hold(belief.copy(), window.full_box(model))
+        loc._hold(belief.copy())
     odometry = (0.0, 0.0, 0.0)
     for step in range(6):
         odometry = (odometry[0] + 0.1, odometry[1], odometry[2] + 0.05)

@@ -116,22 +116,21 @@ class GridLocalization:
 
     def global_localization(self) -> None:
         """Not knowing where the robot is: uniform over the free cells."""
-        self._hold(grid.uniform_over_free(self.model), window.full_box(self.model))
+        self._hold(grid.uniform_over_free(self.model))
         self.log_evidence = float("nan")
 
     def set_prior(self, pose: Pose, covariance: FloatArray) -> None:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
         x, y, yaw = grid.check_pose("pose", pose)
         prior = grid.gaussian_prior(self.model, x, y, yaw, covariance)
-        self._hold(prior, window.full_box(self.model))
+        self._hold(prior)
 
-    def _hold(self, belief: FloatArray, box: window.Box) -> None:
-        """Take ``belief`` over the whole grid (``box`` the full box) as the belief: with
-        belief_floor > 0 without its states below the floor, and their windows noted."""
-        assert box == window.full_box(self.model)
+    def _hold(self, belief: FloatArray) -> None:
+        """Take ``belief`` over the whole grid as the belief: with belief_floor > 0 without
+        its states below the floor, and their windows noted."""
         self.belief, self.last_dropped = window.drop_below(belief, self._floor)
         self._boxes = window.support_boxes(np.any(self.belief, axis=0)) \
-            if self._floor > 0 else [box]
+            if self._floor > 0 else [window.full_box(self.model)]
 
     def _hold_windows(self, correction: window.Correction) -> None:
         """Take a windowed correction's posterior as the belief, without its states below
@@ -140,11 +139,7 @@ class GridLocalization:
         parts, (ks, rs, cs, kept) = correction.parts, correction.kept
         top = max(max(float(part.max()) for part in parts), float(kept.max(initial=0.0)))
         threshold = min(self._floor, top)    # the largest state is never dropped
-        dropped = 0.0
-        for part in parts:
-            small = part < threshold
-            dropped += float(np.sum(part, where=small))
-            part[small] = 0.0
+        dropped = sum(window.zero_below(part, threshold) for part in parts)
         small = kept < threshold
         dropped += float(kept[small].sum())
         ks, rs, cs, kept = ks[~small], rs[~small], cs[~small], kept[~small]
@@ -226,7 +221,7 @@ class GridLocalization:
             log_evidence = correction.log_evidence
         else:
             posterior, log_evidence = self._dense_step(ranges, angles, delta, weight)
-            self._hold(posterior, window.full_box(self.model))
+            self._hold(posterior)
         self.log_evidence = log_evidence
         self._reference = pose
         self.updates += 1
@@ -254,7 +249,6 @@ class GridLocalization:
         corrected together (window.correct_boxes)."""
         boxes = self._boxes if delta is None else window.disjoint(
             [window.grown_box(box, self.model, delta, self.noise) for box in self._boxes])
-        priors = []
         if delta is None:
             priors = [self._window(box)[1] for box in boxes]
         else:

@@ -158,13 +158,19 @@ def drop_below(belief: FloatArray, floor: float) -> tuple[FloatArray, float]:
     dropped, so the result is a belief whatever the floor."""
     if floor <= 0.0:
         return belief, 0.0
-    small = belief < min(floor, float(belief.max()))
-    # Summed where small, not as belief[small]: that copy is most of a building's belief.
-    dropped = float(np.sum(belief, where=small))
+    dropped = zero_below(belief, min(floor, float(belief.max())))
     if dropped > 0.0:
-        belief[small] = 0.0
         belief /= float(belief.sum())
     return belief, dropped
+
+
+def zero_below(belief: FloatArray, threshold: float) -> float:
+    """Set the states below ``threshold`` to 0, in place; their probability."""
+    small = belief < threshold
+    # Summed where small, not as belief[small]: that copy is most of a building's belief.
+    dropped = float(np.sum(belief, where=small))
+    belief[small] = 0.0
+    return dropped
 
 
 #: The kidnap share goes on one state in KIDNAP_STEP^3: every other heading, row and column.

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from estimation_nodes.core import geometry
 from estimation_nodes.core.grid.occupancy import OCCUPIED, UNKNOWN, OccupancyMap
 from estimation_nodes.core.grid.steps import OdometryNoise
 from estimation_nodes.core.validation import FloatArray
@@ -86,9 +87,7 @@ def compose(pose: Pose, delta: tuple[float, float, float]) -> Pose:
 def sensor_at(pose: Pose, mounting: tuple[float, float, float]) -> Pose:
     """Where a sensor mounted at ``mounting`` (x, y, yaw on the robot) is, with the robot
     at ``pose``."""
-    x, y, yaw = mounting
-    c, s = math.cos(pose[2]), math.sin(pose[2])
-    return pose[0] + x * c - y * s, pose[1] + x * s + y * c, _wrap(pose[2] + yaw)
+    return geometry.compose(pose, mounting)
 
 
 def sample_odometry(delta: tuple[float, float, float], noise: OdometryNoise,

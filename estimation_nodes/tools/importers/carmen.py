@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation_nodes.core.geometry import compose, relative
+
 Pose = tuple[float, float, float]
 
 
@@ -55,23 +57,6 @@ class CarmenLog:
     @property
     def max_reading(self) -> float:
         return max(float(scan.ranges.max()) for scan in self.scans)
-
-
-def compose(a: Pose, b: Pose) -> Pose:
-    """a (+) b: pose b, given in a's frame, in a's parent frame."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return (a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], _wrap(a[2] + b[2]))
-
-
-def relative(a: Pose, b: Pose) -> Pose:
-    """a^-1 (+) b: pose b in a's frame."""
-    c, s = math.cos(a[2]), math.sin(a[2])
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    return (c * dx + s * dy, -s * dx + c * dy, _wrap(b[2] - a[2]))
-
-
-def _wrap(angle: float) -> float:
-    return (angle + math.pi) % (2 * math.pi) - math.pi
 
 
 def _lines(path: Path) -> list[str]:
