@@ -4,9 +4,17 @@ For each robot, the whole run through the core filter (no DDS): position and
 heading RMSE against the motion-capture truth, how often the truth lies in the
 estimate's 95% position ellipse, the longest stretch farther than 0.5 m from the
 truth, and the time the whole run takes. Dead reckoning (odometry alone) and the
-textbook EKF (no gate, no recovery) run beside them on the same data.
+textbook EKF (no gate, no recovery, the package's default models) run beside them on
+the same data.
 
-    python bench/ekf_real.py [--dataset DIR] [--robots 1 2 3]
+The filters take the parameters ekf_localizer takes from ``--params`` (by default
+msgs_config/robots/utias_mrclam.yaml, whose figures bench/utias_calibration.py derives
+from robots 1 to 3 pooled). With ``--cross-validate`` each robot is run with the
+figures derived from the other robots alone (the file's other settings kept): what a robot the
+figures never saw gets.
+
+    python bench/ekf_real.py [--dataset DIR] [--robots 1 2 3] [--params FILE]
+                             [--cross-validate]
 """
 
 from __future__ import annotations
@@ -26,10 +34,17 @@ from timing import table  # noqa: E402
 
 from estimation_nodes.core.kalman import landmarks as lm  # noqa: E402
 from estimation_nodes.core.kalman.landmarks import LandmarkLocalization, Observation  # noqa: E402
-from estimation_nodes.params.landmarks import default_landmark_model  # noqa: E402
+from utias_calibration import calibrate  # noqa: E402
+
+from estimation_nodes.params.landmarks import default_landmark_model, landmark_model  # noqa: E402
+from estimation_nodes.params.param_files import read_node_parameters  # noqa: E402
+from estimation_nodes.params.specs import LANDMARK_MODEL_SPECS, spec_defaults  # noqa: E402
 from estimation_nodes.tools.importers.utias import read_run  # noqa: E402
 
 DATASET = BENCH.parents[1] / "shared" / "data" / "utias" / "MRCLAM_Dataset7"
+PARAMS = BENCH.parent / "msgs_config" / "robots" / "utias_mrclam.yaml"
+#: The covariance every run starts with (it starts at the truth's first pose).
+INITIAL_COVARIANCE = np.diag([0.01, 0.01, 0.01])
 #: Truth samples scored per second (Vicon gives about 60).
 SCORE_HZ = 10.0
 #: Position NEES bound of the 95% ellipse: the chi-square (2 dof) 0.95 quantile.
@@ -89,32 +104,55 @@ def _longest_stretch(times: np.ndarray, off: np.ndarray) -> float:
     return longest
 
 
+def filters(run, figures: dict) -> list[tuple[str, object, bool]]:
+    """(name, model, whether it corrects) of each filter in the table, for ``run``."""
+    textbook = replace(default_landmark_model("ekf", run.landmarks), gate_probability=1.0,
+                       range_std=0.12, range_std_per_m=0.0)
+    tuned = {**spec_defaults(LANDMARK_MODEL_SPECS), **figures}
+    return [("dead reckoning", landmark_model({**tuned, "filter": "ekf"}, run.landmarks),
+             False),
+            ("textbook EKF", textbook, True),
+            ("EKF", landmark_model({**tuned, "filter": "ekf"}, run.landmarks), True),
+            ("UKF", landmark_model({**tuned, "filter": "ukf"}, run.landmarks), True)]
+
+
+def file_figures(path: Path) -> dict:
+    """The landmark-model parameters the file gives ekf_localizer."""
+    values = read_node_parameters(path.read_text(encoding="utf-8"), "/ekf_localizer")
+    names = {spec.name for spec in LANDMARK_MODEL_SPECS} - {"filter"}
+    return {name: value for name, value in values.items() if name in names}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--dataset", type=Path, default=DATASET)
     parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--params", type=Path, default=PARAMS)
+    parser.add_argument("--cross-validate", action="store_true",
+                        help="run each robot with the figures of the other robots")
     args = parser.parse_args()
     if not args.dataset.is_dir():
         sys.exit(f"ekf_real: no dataset at {args.dataset} (see ../shared/data/README.md)")
+    runs = {robot: read_run(args.dataset, robot) for robot in args.robots}
     rows = []
-    for robot in args.robots:
-        run = read_run(args.dataset, robot)
-        for name, kind, textbook, correct in (("dead reckoning", "ekf", False, False),
-                                              ("textbook EKF", "ekf", True, True),
-                                              ("EKF", "ekf", False, True),
-                                              ("UKF", "ukf", False, True)):
-            model = default_landmark_model(kind, run.landmarks)
-            if textbook:
-                # no gate, the sensor's std as measured, constant over the range
-                model = replace(model, gate_probability=1.0, range_std=0.12,
-                                range_std_per_m=0.0)
-            P0 = np.diag([0.01, 0.01, 0.01])
-            times, poses, covs, elapsed, loc = run_filter(run, model, P0, correct)
+    for robot, run in runs.items():
+        figures = file_figures(args.params)
+        if args.cross_validate:
+            # the file's choices (the iterated EKF's passes) stay; its figures are
+            # derived again without this robot
+            others = [other for number, other in runs.items() if number != robot]
+            figures.update(calibrate(others))
+        for name, model, correct in filters(run, figures):
+            times, poses, covs, elapsed, loc = run_filter(run, model, INITIAL_COVARIANCE,
+                                                          correct)
             s = score(run, times, poses, covs)
             rows.append([str(robot), name, f"{s['position_rmse']:.3f}",
                          f"{s['heading_rmse_deg']:.1f}", f"{s['in_ellipse']:.0%}",
                          f"{s['longest_off_s']:.1f}", f"{elapsed:.2f}",
                          ", ".join(f"{k} {v}" for k, v in sorted(loc.counts.items()))])
+    source = "each robot with the figures of the others" if args.cross_validate \
+        else str(args.params)
+    print(f"parameters: {source}")
     print(table(["robot", "filter", "position RMSE (m)", "heading RMSE (deg)",
                  "truth in 95% ellipse", "longest > 0.5 m (s)", "run time (s)", "counts"],
                 rows))

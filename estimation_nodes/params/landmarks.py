@@ -13,7 +13,7 @@ import numpy as np
 import yaml
 
 from estimation_nodes.core.kalman.landmarks import LandmarkModel
-from estimation_nodes.core.kalman.range_bearing import SensorPose
+from estimation_nodes.core.kalman.range_bearing import Ranging, SensorPose
 from estimation_nodes.core.kalman.ukf import SigmaPoints
 from estimation_nodes.core.kalman.unicycle import UnicycleNoise
 from estimation_nodes.core.sim.landmarks import Camera
@@ -44,13 +44,19 @@ def landmark_model(values: Mapping[str, Any],
                          dict(landmarks), bounded("gate_probability",
                                                   values["gate_probability"]),
                          bounded("recovery_time", values["recovery_time"]),
-                         _pair("recovery_std", values["recovery_std"]), points)
+                         _pair("recovery_std", values["recovery_std"]), points,
+                         Ranging(values["range_model"],
+                                 bounded("range_scale", values["range_scale"])),
+                         int(bounded("ekf.iterations", values["ekf.iterations"])),
+                         bounded("odometry_delay", values["odometry_delay"]),
+                         _pair("odometry_scale", values["odometry_scale"],
+                               "[forward, turn]"))
 
 
-def _pair(name: str, value: Any) -> tuple[float, float]:
+def _pair(name: str, value: Any, shape: str = "[position, heading]") -> tuple[float, float]:
     numbers = [float(v) for v in as_list(name, value)]
     if len(numbers) != 2:
-        raise ValueError(f"{name}: expected [position, heading], got {numbers}")
+        raise ValueError(f"{name}: expected {shape}, got {numbers}")
     return numbers[0], numbers[1]
 
 

@@ -369,6 +369,17 @@ LANDMARK_MODEL_SPECS = (
               max_value=10.0),
     ParamSpec("bearing_std", 0.027, "Std (rad) of a landmark's measured bearing.",
               min_value=1e-6, max_value=3.2),
+    ParamSpec("range_model", "euclidean", "What the sensor's range measures: 'euclidean' "
+              "(the distance to the landmark) or 'depth' (its distance along the sensor's "
+              "axis, range cos(bearing), as a camera that ranges by apparent size reports)."),
+    ParamSpec("range_scale", 1.0, "The sensor reports this many times the true range (a "
+              "calibration; 1 for a calibrated sensor).", min_value=0.5, max_value=2.0),
+    ParamSpec("odometry_delay", 0.0, "Seconds between an odometry message's stamp and the "
+              "robot driving its twist (0 for measured speeds; a robot that reports its "
+              "commands follows them late).", min_value=0.0, max_value=10.0),
+    ParamSpec("odometry_scale", [1.0, 1.0], "[forward, turn]: the speeds the robot drives "
+              "per unit of the speeds its odometry reports (1 for measured speeds).",
+              type_name="double_array"),
     ParamSpec("sensor_pose", [0.0, 0.0, 0.0], "[x, y, yaw] of the camera on the robot (m, m, "
               "rad from the robot's heading)."),
     ParamSpec("gate_probability", 0.999, "An observation whose innovation lies outside this "
@@ -380,6 +391,10 @@ LANDMARK_MODEL_SPECS = (
     ParamSpec("recovery_std", [1.0, 0.5], "[position (m), heading (rad)]: the std a recovery "
               "adds to the covariance (the filter admits it no longer knows where it is).",
               type_name="double_array"),
+    ParamSpec("ekf.iterations", 1, "Passes of the EKF's correction, each linearized at the "
+              "last pass's estimate (1: the EKF; more: the iterated EKF, which keeps a "
+              "landmark's bearing from pulling a very uncertain heading astray).",
+              min_value=1, max_value=100),
     ParamSpec("ukf.alpha", 0.5, "The UKF's sigma-point spread (0 < alpha <= 1).",
               read_only=True, min_value=1e-4, max_value=1.0),
     ParamSpec("ukf.beta", 2.0, "The UKF's prior-knowledge weight (2: optimal for a Gaussian).",

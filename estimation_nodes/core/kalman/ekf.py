@@ -6,6 +6,13 @@ state and in the step's distance and turn, M their variances). Correction with o
 landmark's range and bearing z: y = z - h(x) (the bearing wrapped), S = H P H' + R,
 K = P H' S^-1, x' = x + K y, and the Joseph form P' = (I - K H) P (I - K H)' + K R K',
 which stays symmetric and positive semi-definite whatever the rounding.
+
+The iterated EKF (Bell and Cathey 1993) linearizes the measurement again at the
+estimate the last pass gave, x_i+1 = x + K_i (z - h(x_i) - H_i (x - x_i)), until the
+step is below ``ITERATION_STEP``: a Gauss-Newton search of the posterior's mode. One
+pass is the plain EKF. It matters after a long time unobserved, when the heading is
+tens of degrees uncertain and a landmark's bearing, linearized there, would move the
+estimate along a tangent far from the arc the measurement allows.
 Every function returns new values and leaves its inputs alone.
 """
 
@@ -16,11 +23,13 @@ from typing import NamedTuple
 import numpy as np
 
 from estimation_nodes.core.kalman import range_bearing, unicycle
-from estimation_nodes.core.kalman.range_bearing import SensorPose
+from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, SensorPose
 from estimation_nodes.core.kalman.unicycle import UnicycleNoise, wrap
 from estimation_nodes.core.validation import FloatArray
 
 IDENTITY = np.eye(3)
+#: The iterated EKF stops when no state component moves more than this (m or rad).
+ITERATION_STEP = 1e-9
 
 
 class Innovation(NamedTuple):
@@ -55,13 +64,14 @@ def predict(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
 
 
 def innovation(x: FloatArray, P: FloatArray, z: FloatArray, landmark: tuple[float, float],
-               sensor: SensorPose, R: FloatArray) -> Innovation:
+               sensor: SensorPose, R: FloatArray,
+               ranging: Ranging = EUCLIDEAN) -> Innovation:
     """A range-bearing observation ``z`` of ``landmark``, linearized at x."""
-    H = range_bearing.jacobian(x, landmark, sensor)
+    H = range_bearing.jacobian(x, landmark, sensor, ranging)
     PHt = P @ H.T
     S = _symmetric(H @ PHt + R)
-    return Innovation(range_bearing.residual(z, range_bearing.expected(x, landmark, sensor)),
-                      S, PHt, H)
+    predicted = range_bearing.expected(x, landmark, sensor, ranging)
+    return Innovation(range_bearing.residual(z, predicted), S, PHt, H)
 
 
 def correct(x: FloatArray, P: FloatArray, observed: Innovation,
@@ -73,3 +83,28 @@ def correct(x: FloatArray, P: FloatArray, observed: Innovation,
     x_next[2] = wrap(x_next[2])
     I_KH = IDENTITY - K @ observed.H
     return x_next, _symmetric(I_KH @ P @ I_KH.T + K @ R @ K.T)
+
+
+def correct_iterated(x: FloatArray, P: FloatArray, observed: Innovation, z: FloatArray,
+                     landmark: tuple[float, float], sensor: SensorPose, R: FloatArray,
+                     ranging: Ranging, iterations: int) -> tuple[FloatArray, FloatArray]:
+    """The observation applied by the iterated EKF, at most ``iterations`` passes (the
+    first is ``observed``, linearized at x); the Joseph form at the last linearization."""
+    x_next, _ = correct(x, P, observed, R)
+    last = observed
+    for _ in range(iterations - 1):
+        at = x_next
+        H = range_bearing.jacobian(at, landmark, sensor, ranging)
+        PHt = P @ H.T
+        S = _symmetric(H @ PHt + R)
+        offset = x - at
+        offset[2] = wrap(offset[2])
+        y = range_bearing.residual(z, range_bearing.expected(at, landmark, sensor, ranging)) \
+            - H @ offset
+        last = Innovation(y, S, PHt, H)
+        x_next, _ = correct(x, P, last, R)
+        step = x_next - at
+        step[2] = wrap(step[2])
+        if np.abs(step).max() <= ITERATION_STEP:
+            break
+    return correct(x, P, last, R)

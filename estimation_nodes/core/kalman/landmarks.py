@@ -17,12 +17,17 @@ judges the observation again from that; if it still does not fit, the
 covariance grows again after another ``recovery_time``, until observations pass.
 The gate stays on throughout, so a wrong identification (a landmark seen behind
 the robot) is rejected even while the filter recovers.
+
+Odometry that reports commanded speeds, not measured ones, meets two facts of the
+robot it drives: the robot follows a command ``odometry_delay`` seconds after it is
+stamped, and at ``odometry_scale`` (forward, turn) times the commanded speeds. Both
+default to the identity (delay 0, scale 1) of measured odometry.
 """
 
 from __future__ import annotations
 
 import math
-from collections import Counter
+from collections import Counter, deque
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
@@ -30,7 +35,7 @@ import numpy as np
 
 from estimation_nodes.core.kalman import ekf, ukf
 from estimation_nodes.core.kalman.ekf import Innovation
-from estimation_nodes.core.kalman.range_bearing import SensorPose
+from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, SensorPose
 from estimation_nodes.core.kalman.unicycle import UnicycleNoise
 from estimation_nodes.core.validation import FloatArray, as_finite_array, check_covariance
 
@@ -64,6 +69,14 @@ class LandmarkModel:
     recovery_std: tuple[float, float]
     #: The UKF's sigma points; None for the EKF.
     points: ukf.SigmaPoints | None = None
+    #: What the sensor's range measures (the distance, or the depth along its axis).
+    ranging: Ranging = EUCLIDEAN
+    #: The EKF's passes per observation (1: the EKF; more: the iterated EKF).
+    iterations: int = 1
+    #: Seconds between an odometry message's stamp and the robot driving it.
+    odometry_delay: float = 0.0
+    #: (forward, turn): the speeds the robot drives per unit of reported speed.
+    odometry_scale: tuple[float, float] = (1.0, 1.0)
 
     def __post_init__(self) -> None:
         if self.kind not in FILTERS:
@@ -87,6 +100,16 @@ class LandmarkModel:
                 or len(self.recovery_std) != 2:
             raise ValueError(f"recovery_std: expected [position m, heading rad] > 0, got "
                              f"{list(self.recovery_std)}")
+        if not (isinstance(self.iterations, int) and 1 <= self.iterations <= 100):
+            raise ValueError(f"ekf.iterations: expected an integer in 1..100, got "
+                             f"{self.iterations!r}")
+        if not (math.isfinite(self.odometry_delay) and 0 <= self.odometry_delay <= 10):
+            raise ValueError(f"odometry_delay: expected 0 <= seconds <= 10, got "
+                             f"{self.odometry_delay!r}")
+        if len(self.odometry_scale) != 2 or not all(
+                math.isfinite(v) and v > 0 for v in self.odometry_scale):
+            raise ValueError(f"odometry_scale: expected [forward, turn] > 0, got "
+                             f"{list(self.odometry_scale)}")
         for key, (lx, ly) in self.landmarks.items():
             if not (math.isfinite(lx) and math.isfinite(ly)):
                 raise ValueError(f"landmarks: landmark {key} at ({lx}, {ly}) is not finite")
@@ -136,6 +159,8 @@ class LandmarkLocalization:
         self.P = check_covariance("initial_covariance", P0, 3)
         self.t = None if t0 is None else float(t0)
         self.twist = (0.0, 0.0)
+        #: Twists stamped but not yet driven (odometry_delay): (time driven from, twist).
+        self._coming: deque[tuple[float, tuple[float, float]]] = deque()
         self.counts: Counter[str] = Counter()
         self._last_used = self.t
         self._gated_since_used = 0
@@ -143,22 +168,29 @@ class LandmarkLocalization:
     # --- state, as causal_order.py saves and restores it ---------------------------------
 
     def snapshot(self) -> tuple:
-        return (self.x, self.P, self.t, self.twist, self.counts.copy(), self._last_used,
-                self._gated_since_used)
+        return (self.x, self.P, self.t, self.twist, tuple(self._coming), self.counts.copy(),
+                self._last_used, self._gated_since_used)
 
     def restore(self, state: tuple) -> None:
-        (self.x, self.P, self.t, self.twist, counts, self._last_used,
+        (self.x, self.P, self.t, self.twist, coming, counts, self._last_used,
          self._gated_since_used) = state
+        self._coming = deque(coming)
         self.counts = counts.copy()
 
     # --- events --------------------------------------------------------------------------
 
     def on_odometry(self, t: float, v: float, w: float) -> None:
-        """The twist in force from ``t`` on; the pose predicted to ``t`` with the last one."""
+        """The twist in force from ``t`` (plus odometry_delay) on; the pose predicted to
+        ``t`` with the twists before it."""
         if not (math.isfinite(v) and math.isfinite(w)):
             raise ValueError(f"odometry: expected finite speeds, got v={v!r}, w={w!r}")
         self._predict_to(t)
-        self.twist = (float(v), float(w))
+        forward, turn = self.model.odometry_scale
+        twist = (float(v) * forward, float(w) * turn)
+        if self.model.odometry_delay == 0:
+            self.twist = twist
+        else:
+            self._coming.append((self.t + self.model.odometry_delay, twist))
 
     def on_frame(self, t: float, observations: Iterable[Observation]) -> list[Outcome]:
         """A camera frame at ``t``: predict to it, then apply each observation."""
@@ -171,12 +203,21 @@ class LandmarkLocalization:
         if self.t is None:
             self.t = self._last_used = t
             return
-        dt = t - self.t
-        if dt <= 0:
+        if t < self.t:
             # A late event is applied at the filter's time (causal_order.py puts them
             # in order first; what it cannot is counted).
-            if dt < 0:
-                self.counts["late"] += 1
+            self.counts["late"] += 1
+            return
+        while self._coming and self._coming[0][0] <= t:
+            start, twist = self._coming.popleft()
+            self._drive_to(start)
+            self.twist = twist
+        self._drive_to(t)
+
+    def _drive_to(self, t: float) -> None:
+        """The pose predicted to ``t`` with the twist in force."""
+        dt = t - self.t
+        if dt <= 0:
             return
         v, w = self.twist
         model = self.model
@@ -191,9 +232,10 @@ class LandmarkLocalization:
         model = self.model
         R = model.R(float(z[0]))
         if model.kind == "ekf":
-            return ekf.innovation(self.x, self.P, z, landmark, model.sensor, R)
+            return ekf.innovation(self.x, self.P, z, landmark, model.sensor, R, model.ranging)
         assert model.points is not None
-        return ukf.innovation(self.x, self.P, z, landmark, model.sensor, R, model.points)
+        return ukf.innovation(self.x, self.P, z, landmark, model.sensor, R, model.points,
+                              model.ranging)
 
     def _observe(self, observation: Observation) -> Outcome:
         landmark = self.model.landmarks.get(observation.landmark)
@@ -224,7 +266,7 @@ class LandmarkLocalization:
                 self._gated_since_used += 1
                 return Outcome(observation, "gated", nis)
             self.counts["recovered"] += 1
-        if not self._apply(observed, z):
+        if not self._apply(observed, z, landmark):
             self.counts["unstable"] += 1
             return Outcome(observation, "unstable", nis)
         self.counts["used"] += 1
@@ -252,11 +294,16 @@ class LandmarkLocalization:
         # Each widening gets its recovery_time for the observations to pass.
         self._last_used = self.t
 
-    def _apply(self, observed: Innovation, z: FloatArray) -> bool:
+    def _apply(self, observed: Innovation, z: FloatArray,
+               landmark: tuple[float, float]) -> bool:
         """The correction applied where it leaves a finite estimate with a positive definite
         covariance (the UKF's P - K S K' need not, after a large innovation)."""
-        if self.model.kind == "ekf":
-            x, P = ekf.correct(self.x, self.P, observed, self.model.R(float(z[0])))
+        model = self.model
+        if model.kind == "ekf" and model.iterations > 1:
+            x, P = ekf.correct_iterated(self.x, self.P, observed, z, landmark, model.sensor,
+                                        model.R(float(z[0])), model.ranging, model.iterations)
+        elif model.kind == "ekf":
+            x, P = ekf.correct(self.x, self.P, observed, model.R(float(z[0])))
         else:
             x, P = ukf.correct(self.x, self.P, observed)
         if not (np.isfinite(x).all() and np.isfinite(P).all()):

@@ -8,6 +8,12 @@ heading; from the robot's pose (x, y, theta) it is at::
 
 and a landmark at (lx, ly) is seen at range sqrt(dx^2 + dy^2) and bearing
 atan2(dy, dx) - theta - yaw, with dx = lx - px, dy = ly - py.
+
+A camera that finds a landmark's distance from its apparent size in the image may
+report not that range but the landmark's depth: its distance along the camera's
+axis, range cos(bearing) (``Ranging("depth")``; the UTIAS MRCLAM cameras do, see
+bench/utias_calibration.py). Either may carry a scale (an uncalibrated lens or
+target size): the reported value is ``scale`` times the true one.
 """
 
 from __future__ import annotations
@@ -39,6 +45,28 @@ class SensorPose:
                 raise ValueError(f"sensor_pose.{name}: expected a finite number, got {value!r}")
 
 
+RANGE_KINDS = ("euclidean", "depth")
+
+
+@dataclass(frozen=True)
+class Ranging:
+    """What the sensor's range measures: 'euclidean' (the distance to the landmark) or
+    'depth' (the distance along the sensor's axis), times ``scale``."""
+
+    kind: str = "euclidean"
+    scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in RANGE_KINDS:
+            raise ValueError(f"range_model: expected one of {RANGE_KINDS}, got {self.kind!r}")
+        if not (isinstance(self.scale, (int, float)) and math.isfinite(self.scale)
+                and self.scale > 0):
+            raise ValueError(f"range_scale: expected a finite number > 0, got {self.scale!r}")
+
+
+EUCLIDEAN = Ranging()
+
+
 def _offsets(x: FloatArray, landmark: tuple[float, float],
              sensor: SensorPose) -> tuple[float, float, float, float]:
     """dx, dy from the sensor to the landmark, and d px / d theta, d py / d theta."""
@@ -50,13 +78,20 @@ def _offsets(x: FloatArray, landmark: tuple[float, float],
     return landmark[0] - px, landmark[1] - py, dpx, dpy
 
 
-def expected(x: FloatArray, landmark: tuple[float, float], sensor: SensorPose) -> FloatArray:
+def expected(x: FloatArray, landmark: tuple[float, float], sensor: SensorPose,
+             ranging: Ranging = EUCLIDEAN) -> FloatArray:
     """(range, bearing) of ``landmark`` from pose ``x``."""
     dx, dy, _, _ = _offsets(x, landmark, sensor)
-    return np.array([math.hypot(dx, dy), wrap(math.atan2(dy, dx) - x[2] - sensor.yaw)])
+    axis = x[2] + sensor.yaw
+    if ranging.kind == "depth":
+        distance = dx * math.cos(axis) + dy * math.sin(axis)
+    else:
+        distance = math.hypot(dx, dy)
+    return np.array([ranging.scale * distance, wrap(math.atan2(dy, dx) - axis)])
 
 
-def jacobian(x: FloatArray, landmark: tuple[float, float], sensor: SensorPose) -> FloatArray:
+def jacobian(x: FloatArray, landmark: tuple[float, float], sensor: SensorPose,
+             ranging: Ranging = EUCLIDEAN) -> FloatArray:
     """d (range, bearing) / d (x, y, theta), 2 x 3; ValueError where the landmark sits on
     the sensor (no bearing)."""
     dx, dy, dpx, dpy = _offsets(x, landmark, sensor)
@@ -64,8 +99,14 @@ def jacobian(x: FloatArray, landmark: tuple[float, float], sensor: SensorPose) -
     r = math.sqrt(q)
     if r < MIN_RANGE:
         raise ValueError(f"landmark: at {r:.3g} m from the sensor, its bearing is undefined")
+    if ranging.kind == "depth":
+        # depth = dx cos(a) + dy sin(a), a = theta + yaw, and dx, dy move with theta too
+        c, s = math.cos(x[2] + sensor.yaw), math.sin(x[2] + sensor.yaw)
+        distance_row = [-c, -s, -dpx * c - dpy * s - dx * s + dy * c]
+    else:
+        distance_row = [-dx / r, -dy / r, -(dx * dpx + dy * dpy) / r]
     return np.array([
-        [-dx / r, -dy / r, -(dx * dpx + dy * dpy) / r],
+        [ranging.scale * d for d in distance_row],
         [dy / q, -dx / q, (dy * dpx - dx * dpy) / q - 1.0],
     ])
 

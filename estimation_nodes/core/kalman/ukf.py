@@ -20,7 +20,7 @@ import numpy as np
 
 from estimation_nodes.core.kalman import range_bearing, unicycle
 from estimation_nodes.core.kalman.ekf import Innovation, _symmetric
-from estimation_nodes.core.kalman.range_bearing import SensorPose
+from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, SensorPose
 from estimation_nodes.core.kalman.unicycle import TWO_PI, UnicycleNoise, wrap
 from estimation_nodes.core.validation import FloatArray
 
@@ -97,10 +97,11 @@ def predict(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
 
 
 def innovation(x: FloatArray, P: FloatArray, z: FloatArray, landmark: tuple[float, float],
-               sensor: SensorPose, R: FloatArray, points: SigmaPoints) -> Innovation:
+               sensor: SensorPose, R: FloatArray, points: SigmaPoints,
+               ranging: Ranging = EUCLIDEAN) -> Innovation:
     """A range-bearing observation ``z`` of ``landmark``, through the sigma points of (x, P)."""
     sigmas = points.draw(x, P)
-    seen = np.array([range_bearing.expected(s, landmark, sensor) for s in sigmas])
+    seen = np.array([range_bearing.expected(s, landmark, sensor, ranging) for s in sigmas])
     predicted = points.mean(seen, angle=1)
     dz = _differences(seen, predicted, angle=1)
     dx = _differences(sigmas, x, angle=2)

@@ -1,0 +1,217 @@
+"""The landmark filter's figures for the UTIAS robots, derived from their data.
+
+Every noise figure and calibration of the UTIAS parameter file
+(msgs_config/robots/utias_mrclam.yaml) comes from this script, pooled over the robots
+given (by default 1 to 3 of dataset 7): one set of figures for every robot, none
+tuned to one. The ground truth (Vicon) is what each figure is measured against:
+
+- the camera: its reported range against the true distance and against the true
+  depth (the distance along the camera's axis), the scale of the better one, the
+  spread of what is left (std = a + b * range), and the bearing's std;
+- the odometry (commanded speeds): the delay after which the robot follows a
+  command, the share of the commanded forward and turn speeds it drives, and the
+  variance of a step's distance and turn (the filter's noise.* terms), fitted over
+  windows of WINDOW_S seconds.
+
+    python bench/utias_calibration.py [--dataset DIR] [--robots 1 2 3]
+
+bench/ekf_real.py --cross-validate calls ``calibrate`` with each robot left out.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import nnls
+
+from estimation_nodes.tools.importers.utias import UtiasRun, read_run
+
+DATASET = Path(__file__).resolve().parents[2] / "shared" / "data" / "utias" / \
+    "MRCLAM_Dataset7"
+#: Seconds over which the odometry's errors are fitted: the order of the time a
+#: robot goes without seeing a landmark, where the filter lives on odometry alone.
+WINDOW_S = 5.0
+#: Delays (s) tried between a command's stamp and the robot following it.
+DELAYS = np.round(np.arange(0.0, 0.51, 0.05), 2)
+#: An observation this far from the truth (rad of bearing) is a misidentification,
+#: left out of the camera's figures (the filter's gate is for those).
+OUTLIER_BEARING = 0.1
+#: The range std's constant term is at least this (m): the fit finds the spread
+#: proportional to the range, and the filter needs a term > 0.
+MIN_RANGE_STD = 0.001
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def _truth_at(run: UtiasRun, times: np.ndarray) -> np.ndarray:
+    """Vicon's x, y, unwrapped heading at ``times`` (linear interpolation)."""
+    truth = run.truth
+    heading = np.unwrap(truth[:, 3])
+    return np.column_stack([np.interp(times, truth[:, 0], truth[:, i]) for i in (1, 2)]
+                           + [np.interp(times, truth[:, 0], heading)])
+
+
+def landmark_geometry(run: UtiasRun) -> dict[str, np.ndarray]:
+    """For every detection of a landmark: the reported range and bearing, the true
+    distance, depth and bearing from Vicon's pose at the detection's time."""
+    detections = run.detections
+    known = np.array([int(s) in run.landmarks for s in detections[:, 1]], dtype=bool)
+    detections = detections[known]
+    where = np.array([run.landmarks[int(s)] for s in detections[:, 1]])
+    pose = _truth_at(run, detections[:, 0])
+    dx, dy = where[:, 0] - pose[:, 0], where[:, 1] - pose[:, 1]
+    cos, sin = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    return {"range": detections[:, 2], "bearing": detections[:, 3],
+            "distance": np.hypot(dx, dy), "depth": dx * cos + dy * sin,
+            "true_bearing": _wrap(np.arctan2(dy, dx) - pose[:, 2])}
+
+
+def camera_figures(runs: Sequence[UtiasRun]) -> dict[str, float]:
+    """The range model that fits best, its scale, the range's and the bearing's spread."""
+    pooled = [landmark_geometry(run) for run in runs]
+    seen = {key: np.concatenate([g[key] for g in pooled]) for key in pooled[0]}
+    bearing_error = _wrap(seen["bearing"] - seen["true_bearing"])
+    keep = np.abs(bearing_error) < OUTLIER_BEARING
+    figures: dict[str, float] = {"observations": float(keep.sum()),
+                                 "outliers": float((~keep).sum())}
+    residual_std = {}
+    for kind in ("distance", "depth"):
+        true = seen[kind][keep]
+        scale = float(true @ seen["range"][keep] / (true @ true))
+        residual_std[kind] = float(np.std(seen["range"][keep] - scale * true))
+        figures[f"{kind}_scale"] = scale
+        figures[f"{kind}_residual_std"] = residual_std[kind]
+    kind = min(residual_std, key=residual_std.get)
+    figures["range_model"] = "depth" if kind == "depth" else "euclidean"
+    figures["range_scale"] = figures[f"{kind}_scale"]
+    true = seen[kind][keep]
+    residual = np.abs(seen["range"][keep] - figures["range_scale"] * true)
+    # E|e| = sqrt(2/pi) std for a Gaussian e: fit std = a + b range on |e|
+    coefficients, _ = nnls(np.column_stack([np.ones_like(true), true]),
+                           residual / math.sqrt(2 / math.pi))
+    figures["range_std"] = max(float(coefficients[0]), MIN_RANGE_STD)
+    figures["range_std_per_m"] = float(coefficients[1])
+    figures["bearing_std"] = float(np.std(bearing_error[keep]))
+    return figures
+
+
+def _commanded(run: UtiasRun, starts: np.ndarray, delay: float) -> np.ndarray:
+    """Integrals over [start, start + WINDOW_S] of the commanded v, w, |w| with the
+    robot following each command ``delay`` seconds after its stamp."""
+    odometry = run.odometry
+    stamps = odometry[:, 0] + delay
+    step = 0.01
+    grid = np.arange(starts[0], starts[-1] + WINDOW_S + step, step)
+    index = np.searchsorted(stamps, grid, side="right") - 1
+    speeds = np.where(index[:, None] >= 0, odometry[np.maximum(index, 0), 1:3], 0.0)
+    speeds = np.column_stack([speeds, np.abs(speeds[:, 1]), np.abs(speeds[:, 0])])
+    cumulative = np.vstack([np.zeros(4), np.cumsum(speeds[:-1] * step, axis=0)])
+    at = lambda t: np.column_stack([np.interp(t, grid, c) for c in cumulative.T])  # noqa: E731
+    return at(starts + WINDOW_S) - at(starts)
+
+
+def _windows(run: UtiasRun) -> np.ndarray:
+    first = max(run.truth[0, 0], run.odometry[0, 0]) + 1.0
+    last = min(run.truth[-1, 0], run.odometry[-1, 0]) - WINDOW_S - 1.0
+    return np.arange(first, last, WINDOW_S / 2)
+
+
+def _true_motion(run: UtiasRun, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distance forward (along the mean heading) and the turn of each window."""
+    begin, end = _truth_at(run, starts), _truth_at(run, starts + WINDOW_S)
+    heading = 0.5 * (begin[:, 2] + end[:, 2])
+    forward = (end[:, 0] - begin[:, 0]) * np.cos(heading) \
+        + (end[:, 1] - begin[:, 1]) * np.sin(heading)
+    return forward, end[:, 2] - begin[:, 2]
+
+
+def odometry_figures(runs: Sequence[UtiasRun]) -> dict[str, float]:
+    """Delay, scales and the noise.* variances of the commanded odometry."""
+    motion = [(_windows(run), *_true_motion(run, _windows(run))) for run in runs]
+
+    def pooled(delay: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        commanded = np.vstack([_commanded(run, starts, delay)
+                               for run, (starts, _, _) in zip(runs, motion)])
+        forward = np.concatenate([m[1] for m in motion])
+        turn = np.concatenate([m[2] for m in motion])
+        return commanded, forward, turn
+
+    def turn_misfit(delay: float) -> float:
+        commanded, _, turn = pooled(delay)
+        scale = commanded[:, 1] @ turn / (commanded[:, 1] @ commanded[:, 1])
+        return float(np.mean((turn - scale * commanded[:, 1]) ** 2))
+
+    delay = float(min(DELAYS, key=turn_misfit))
+    commanded, forward, turn = pooled(delay)
+    forward_scale = float(commanded[:, 0] @ forward / (commanded[:, 0] @ commanded[:, 0]))
+    turn_scale = float(commanded[:, 1] @ turn / (commanded[:, 1] @ commanded[:, 1]))
+    # The filter's step variances, var = per_m |d| + per_rad |phi| + per_s dt, with the
+    # distance and turn the robot drove (the scaled commands); variances add over steps.
+    # The distance's error is fitted per metre and the turn's per radian and per second
+    # only: distance, turn and time grow together, and with all three terms free the
+    # fit trades one for another from one robot to the next.
+    distance = forward_scale * commanded[:, 3]
+    turned = turn_scale * commanded[:, 2]
+    distance_error = forward - forward_scale * commanded[:, 0]
+    turn_error = turn - turn_scale * commanded[:, 1]
+    per_m, _ = nnls(distance[:, None], distance_error ** 2)
+    rotation, _ = nnls(np.column_stack([turned, np.full(len(turned), WINDOW_S)]),
+                       turn_error ** 2)
+    noise = {"noise.translation_per_m": float(per_m[0]), "noise.translation_per_rad": 0.0,
+             "noise.translation_per_s": 0.0, "noise.rotation_per_m": 0.0,
+             "noise.rotation_per_rad": float(rotation[0]),
+             "noise.rotation_per_s": float(rotation[1])}
+    return {"odometry_delay": delay, "forward_scale": forward_scale, "turn_scale": turn_scale,
+            **noise, "windows": float(len(commanded))}
+
+
+def calibrate(runs: Sequence[UtiasRun]) -> dict[str, object]:
+    """The ekf_localizer parameters these robots' data give (see the module's text)."""
+    camera, odometry = camera_figures(runs), odometry_figures(runs)
+    return {
+        "range_model": camera["range_model"], "range_scale": camera["range_scale"],
+        "range_std": camera["range_std"], "range_std_per_m": camera["range_std_per_m"],
+        "bearing_std": camera["bearing_std"],
+        "odometry_delay": odometry["odometry_delay"],
+        "odometry_scale": [odometry["forward_scale"], odometry["turn_scale"]],
+        **{name: value for name, value in odometry.items() if name.startswith("noise.")},
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--dataset", type=Path, default=DATASET)
+    parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 3])
+    args = parser.parse_args()
+    if not args.dataset.is_dir():
+        sys.exit(f"utias_calibration: no dataset at {args.dataset} "
+                 f"(see ../shared/data/README.md)")
+    runs = [read_run(args.dataset, robot) for robot in args.robots]
+    camera, odometry = camera_figures(runs), odometry_figures(runs)
+    print(f"robots {args.robots} of {args.dataset.name}")
+    print(f"camera: {camera['observations']:.0f} landmark observations, "
+          f"{camera['outliers']:.0f} left out (bearing > {OUTLIER_BEARING} rad off)")
+    for kind in ("distance", "depth"):
+        print(f"  range = {camera[f'{kind}_scale']:.4f} x true {kind}: residual std "
+              f"{camera[f'{kind}_residual_std']:.4f} m")
+    print(f"  range std = {camera['range_std']:.4f} + {camera['range_std_per_m']:.4f} "
+          f"x range; bearing std {camera['bearing_std']:.4f} rad")
+    print(f"odometry: {odometry['windows']:.0f} windows of {WINDOW_S:g} s; followed "
+          f"{odometry['odometry_delay']:.2f} s late; drives {odometry['forward_scale']:.3f} "
+          f"of the forward and {odometry['turn_scale']:.3f} of the turn speed commanded")
+    print("parameters (ekf_localizer):")
+    for name, value in calibrate(runs).items():
+        shown = [round(v, 4) for v in value] if isinstance(value, list) else (
+            value if isinstance(value, str) else f"{value:.4g}")
+        print(f"  {name}: {shown}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,234 @@
+"""The landmark filter's models for real robots: a camera that reports depth, the iterated
+EKF, and odometry that reports commands (followed late, at a share of their speed)."""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from estimation_nodes.core.kalman import ekf, range_bearing, ukf
+from estimation_nodes.core.kalman.landmarks import LandmarkLocalization, LandmarkModel, Observation
+from estimation_nodes.core.kalman.range_bearing import Ranging, SensorPose
+from estimation_nodes.core.kalman.unicycle import UnicycleNoise, wrap
+from estimation_nodes.params.landmarks import landmark_model
+from estimation_nodes.params.param_files import read_node_parameters
+from estimation_nodes.params.specs import LANDMARK_MODEL_SPECS, spec_defaults
+
+SENSOR = SensorPose(0.05, -0.02, 0.03)
+NOISE = UnicycleNoise(4e-4, 3e-3, 1e-6, 1e-4, 1.2e-2, 1.2e-3)
+DEPTH = Ranging("depth", 1.035)
+
+
+def numeric_jacobian(function, x):
+    columns = []
+    for i in range(x.size):
+        step = np.zeros_like(x)
+        step[i] = 1e-6
+        columns.append(range_bearing.residual(function(x + step), function(x - step)) / 2e-6)
+    return np.column_stack(columns)
+
+
+def model(**changes) -> LandmarkModel:
+    base = LandmarkModel("ekf", NOISE, 0.01, 0.02, 0.02, SENSOR, {6: (2.0, 1.0), 7: (0.5, 3.0)},
+                         1.0, 5.0, (1.0, 0.5))
+    return replace(base, **changes)
+
+
+def test_depth_is_the_distance_along_the_sensors_axis_times_the_scale():
+    x = np.array([0.3, -0.2, 0.4])
+    landmark = (3.0, 1.5)
+    distance, bearing = range_bearing.expected(x, landmark, SENSOR)
+    depth, same_bearing = range_bearing.expected(x, landmark, SENSOR, DEPTH)
+    assert depth == pytest.approx(1.035 * distance * math.cos(bearing), rel=1e-12)
+    assert same_bearing == bearing
+
+
+@pytest.mark.parametrize("ranging", [Ranging(), Ranging("euclidean", 0.97), DEPTH])
+@pytest.mark.parametrize("pose", [(1.0, 2.0, 0.7), (-0.3, 0.4, -2.9), (0.0, 0.0, math.pi - 1e-3)])
+def test_the_jacobian_of_each_ranging_is_its_derivative(ranging, pose):
+    x = np.array(pose)
+    for landmark in [(2.0, 1.0), (-1.5, 2.5), (0.5, -2.0)]:
+        expected = numeric_jacobian(
+            lambda s, lm=landmark: range_bearing.expected(s, lm, SENSOR, ranging), x)
+        np.testing.assert_allclose(range_bearing.jacobian(x, landmark, SENSOR, ranging),
+                                   expected, atol=1e-7)
+
+
+def test_a_ranging_that_cannot_be_is_refused():
+    with pytest.raises(ValueError, match="range_model"):
+        Ranging("stereo")
+    for scale in (0.0, -1.0, math.inf, math.nan):
+        with pytest.raises(ValueError, match="range_scale"):
+            Ranging("depth", scale)
+
+
+def _iterated(x, P, z, landmark, R, iterations):
+    observed = ekf.innovation(x, P, z, landmark, SENSOR, R, DEPTH)
+    return ekf.correct_iterated(x, P, observed, z, landmark, SENSOR, R, DEPTH, iterations)
+
+
+def test_one_pass_of_the_iterated_ekf_is_the_ekf():
+    x, P = np.array([0.0, 0.0, 0.2]), np.diag([0.04, 0.04, 0.05])
+    R = np.diag([0.05 ** 2, 0.02 ** 2])
+    z = np.array([2.5, 0.3])
+    plain = ekf.correct(x, P, ekf.innovation(x, P, z, (3.0, 1.0), SENSOR, R, DEPTH), R)
+    once = _iterated(x, P, z, (3.0, 1.0), R, 1)
+    np.testing.assert_array_equal(once[0], plain[0])
+    np.testing.assert_array_equal(once[1], plain[1])
+
+
+def test_the_iterated_ekf_finds_the_mode_of_the_posterior():
+    # A heading 30 degrees uncertain: the posterior's mode minimizes
+    # (x - x0)' P^-1 (x - x0) + (z - h(x))' R^-1 (z - h(x)); its gradient there is zero.
+    x0, P = np.array([0.0, 0.0, 0.5]), np.diag([0.01, 0.01, math.radians(30) ** 2])
+    R = np.diag([0.03 ** 2, 0.01 ** 2])
+    landmark = (3.0, 0.0)
+    truth = np.array([0.05, -0.05, 0.05])
+    z = range_bearing.expected(truth, landmark, SENSOR, DEPTH)
+
+    def terms(x):
+        dx = x - x0
+        dx[2] = wrap(dx[2])
+        y = range_bearing.residual(z, range_bearing.expected(x, landmark, SENSOR, DEPTH))
+        return dx, y
+
+    def gradient(x):
+        dx, y = terms(x)
+        H = range_bearing.jacobian(x, landmark, SENSOR, DEPTH)
+        return np.linalg.solve(P, dx) - H.T @ np.linalg.solve(R, y)
+
+    def cost(x):
+        dx, y = terms(x)
+        return dx @ np.linalg.solve(P, dx) + y @ np.linalg.solve(R, y)
+
+    once, _ = _iterated(x0, P, z, landmark, R, 1)
+    mode, _ = _iterated(x0, P, z, landmark, R, 50)
+    assert np.abs(gradient(mode)).max() < 1e-6 * np.abs(gradient(once)).max()
+    assert cost(mode) < cost(once)
+
+
+def test_a_command_is_driven_after_the_delay_at_the_scaled_speed():
+    late = model(odometry_delay=0.25, odometry_scale=(0.5, 0.8))
+    localization = LandmarkLocalization(late, [0.0, 0.0, 0.0], np.eye(3) * 0.01, 0.0)
+    localization.on_odometry(0.0, 1.0, 0.0)
+    localization.on_odometry(1.0, 0.0, 1.0)     # from 1.25 s on: turning in place
+    localization.on_odometry(2.0, 0.0, 0.0)     # from 2.25 s on: standing
+    # 1 m/s from 0.25 s to 1.25 s, at half the speed: 0.5 m; then 0.8 rad/s to 2 s.
+    np.testing.assert_allclose(localization.x, [0.5, 0.0, 0.6], atol=1e-12)
+    localization.on_odometry(3.0, 0.0, 0.0)     # turned until 2.25 s
+    np.testing.assert_allclose(localization.x, [0.5, 0.0, 0.8], atol=1e-12)
+
+
+def test_commands_not_yet_driven_are_part_of_the_saved_state():
+    late = model(odometry_delay=0.5)
+    localization = LandmarkLocalization(late, [0.0, 0.0, 0.0], np.eye(3) * 0.01, 0.0)
+    localization.on_odometry(0.0, 1.0, 0.0)
+    saved = localization.snapshot()
+    localization.on_odometry(0.2, 5.0, 0.0)
+    localization.on_frame(2.0, [])
+    localization.restore(saved)
+    localization.on_frame(2.0, [])
+    # only the first command was driven, from 0.5 s to 2 s
+    np.testing.assert_allclose(localization.x, [1.5, 0.0, 0.0], atol=1e-12)
+
+
+def test_without_delay_or_scale_the_filter_is_the_one_before():
+    events = [(0.1 * i, (0.2, 0.3 * math.sin(i))) for i in range(40)]
+    plain, same = (LandmarkLocalization(m, [0.0, 0.0, 0.0], np.eye(3) * 0.01, 0.0)
+                   for m in (model(), model(odometry_delay=0.0, odometry_scale=(1.0, 1.0))))
+    for t, (v, w) in events:
+        plain.on_odometry(t, v, w)
+        same.on_odometry(t, v, w)
+        if round(t * 10) % 7 == 6:
+            seen = [Observation(6, 2.0, 0.1)]
+            plain.on_frame(t, seen)
+            same.on_frame(t, seen)
+    np.testing.assert_array_equal(plain.x, same.x)
+    np.testing.assert_array_equal(plain.P, same.P)
+
+
+@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+def test_a_depth_camera_is_tracked_with_the_depth_model(kind):
+    """A robot whose camera reports depth, 3.5 % long, followed by each filter with the
+    depth model: it stays within a few centimetres, where the euclidean model errs."""
+    rng = np.random.default_rng(3)
+    landmarks = {6: (4.0, 1.5), 7: (4.0, -1.5), 8: (6.0, 0.0)}
+    points = ukf.SigmaPoints(0.5, 2.0, 0.0) if kind == "ukf" else None
+    errors = {}
+    for name, ranging in (("depth", DEPTH), ("euclidean", Ranging())):
+        filter_model = model(kind=kind, points=points, ranging=ranging, landmarks=landmarks,
+                             sensor=SensorPose(0.0, 0.0, 0.0))
+        localization = LandmarkLocalization(filter_model, [0.0, 0.0, 0.0],
+                                            np.eye(3) * 0.01, 0.0)
+        pose = np.zeros(3)
+        for step in range(1, 301):
+            t = 0.02 * step
+            localization.on_odometry(t, 0.2, 0.0)
+            pose = pose + [0.2 * 0.02, 0.0, 0.0]
+            if step % 10 == 0:
+                seen = []
+                for key, landmark in landmarks.items():
+                    r, b = range_bearing.expected(pose, landmark, SensorPose(0, 0, 0), DEPTH)
+                    seen.append(Observation(key, r + rng.normal(0, 0.01),
+                                            b + rng.normal(0, 0.005)))
+                localization.on_frame(t, seen)
+        errors[name] = float(np.hypot(*(localization.x[:2] - pose[:2])))
+    assert errors["depth"] < 0.03
+    assert errors["euclidean"] > 2 * errors["depth"]
+
+
+def test_the_parameters_build_the_models():
+    values = {**spec_defaults(LANDMARK_MODEL_SPECS), "range_model": "depth",
+              "range_scale": 1.035, "ekf.iterations": 10, "odometry_delay": 0.25,
+              "odometry_scale": [0.88, 0.95]}
+    built = landmark_model(values, {6: (1.0, 2.0)})
+    assert built.ranging == DEPTH
+    assert (built.iterations, built.odometry_delay, built.odometry_scale) == (10, 0.25,
+                                                                              (0.88, 0.95))
+    for name, bad, message in (("range_model", "lidar", "range_model"),
+                               ("odometry_scale", [1.0], "odometry_scale"),
+                               ("odometry_scale", [1.0, 0.0], "odometry_scale"),
+                               ("odometry_delay", -0.1, "odometry_delay"),
+                               ("ekf.iterations", 0, "ekf.iterations")):
+        with pytest.raises(ValueError, match=message):
+            landmark_model({**values, name: bad}, {6: (1.0, 2.0)})
+
+
+ROBOTS_FILE = Path(__file__).resolve().parents[2] / "msgs_config" / "robots" / "utias_mrclam.yaml"
+DATASET = Path(__file__).resolve().parents[3] / "shared" / "data" / "utias" / "MRCLAM_Dataset7"
+
+
+def _shipped_figures() -> dict:
+    values = read_node_parameters(ROBOTS_FILE.read_text(encoding="utf-8"), "/ekf_localizer")
+    return {name: value for name, value in values.items()
+            if name in spec_defaults(LANDMARK_MODEL_SPECS)}
+
+
+def test_the_shipped_robot_file_builds_a_model():
+    figures = _shipped_figures()
+    built = landmark_model({**spec_defaults(LANDMARK_MODEL_SPECS), **figures}, {6: (0.0, 1.0)})
+    assert built.ranging.kind == "depth" and built.odometry_delay > 0
+
+
+@pytest.mark.skipif(not DATASET.is_dir(), reason="the UTIAS dataset is not in ../shared/data")
+def test_the_shipped_figures_are_what_the_calibration_derives():
+    sys.path.insert(0, str(ROBOTS_FILE.parents[2] / "bench"))
+    try:
+        from utias_calibration import calibrate
+    finally:
+        sys.path.pop(0)
+    from estimation_nodes.tools.importers.utias import read_run
+
+    derived = calibrate([read_run(DATASET, robot) for robot in (1, 2, 3)])
+    shipped = _shipped_figures()
+    for name, value in derived.items():
+        if isinstance(value, str):
+            assert shipped[name] == value, name
+        else:
+            np.testing.assert_allclose(shipped[name], value, rtol=2e-3, atol=1e-6,
+                                       err_msg=name)
