@@ -27,6 +27,7 @@ from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
 
 from estimation_nodes.core.causal_order import CausalOrder
+from estimation_nodes.core.kalman import ukf
 from estimation_nodes.core.kalman.landmarks import LandmarkLocalization
 from estimation_nodes.nodes.diagnostics import status_array
 from estimation_nodes.nodes.grid_messages import covariance_3x3, planar_pose, pose_with_covariance
@@ -80,6 +81,8 @@ class EkfLocalizer(Node):
         self._values, self._settings = declare_and_build(
             self, EKF_LOCALIZER_SPECS, build_ekf_localizer_settings)
         self._landmarks = dict(self._settings.model.landmarks)
+        if self._settings.model.kind == "ukf":
+            ukf.prepare_compiled()
         self.handled: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self._warnings = ThrottledWarnings(self.get_logger())

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from estimation_nodes.core.compiled_loader import load_kernels
 from estimation_nodes.core.kalman import ekf, range_bearing, ukf
 from estimation_nodes.core.kalman.landmarks import LandmarkLocalization, LandmarkModel, Observation
 from estimation_nodes.core.kalman.range_bearing import Ranging, SensorPose
@@ -232,3 +233,42 @@ def test_the_shipped_figures_are_what_the_calibration_derives():
         else:
             np.testing.assert_allclose(shipped[name], value, rtol=2e-3, atol=1e-6,
                                        err_msg=name)
+
+
+def test_the_written_out_prediction_is_the_matrix_one():
+    rng = np.random.default_rng(7)
+    for _ in range(200):
+        x = rng.normal(0, 2, 3)
+        A = rng.normal(0, 0.3, (3, 3))
+        P = A @ A.T + np.eye(3) * 1e-3
+        v, w, dt = rng.normal(0, 0.5), rng.normal(0, 1.0), rng.uniform(0, 0.2)
+        fast = ekf.predict(x, P, v, w, dt, NOISE)
+        matrices = ekf.predict_by_matrices(x, P, v, w, dt, NOISE)
+        np.testing.assert_allclose(fast[0], matrices[0], rtol=0, atol=1e-15)
+        np.testing.assert_allclose(fast[1], matrices[1], rtol=1e-13, atol=1e-15)
+    for bad in (math.nan, math.inf):
+        with pytest.raises(ValueError, match="v"):
+            ekf.predict(x, P, bad, 0.0, 0.1, NOISE)
+    with pytest.raises(ValueError, match="dt"):
+        ekf.predict(x, P, 0.1, 0.0, -0.1, NOISE)
+
+
+@pytest.mark.skipif(load_kernels("estimation_nodes.core.kalman.compiled") is None,
+                    reason="numba does not import here")
+def test_the_compiled_unscented_prediction_is_numpys():
+    rng = np.random.default_rng(8)
+    points = ukf.SigmaPoints(0.5, 2.0, 0.0)
+    for _ in range(200):
+        x = rng.normal(0, 2, 3)
+        x[2] = wrap(x[2])
+        A = rng.normal(0, 0.3, (3, 3))
+        P = A @ A.T + np.eye(3) * 1e-3
+        v, w, dt = rng.normal(0, 0.5), rng.normal(0, 1.0), rng.uniform(0, 0.2)
+        compiled = ukf.predict(x, P, v, w, dt, NOISE, points)
+        reference = ukf.predict_numpy(x, P, v, w, dt, NOISE, points)
+        np.testing.assert_allclose(compiled[0], reference[0], rtol=0, atol=1e-13)
+        np.testing.assert_allclose(compiled[1], reference[1], rtol=1e-12, atol=1e-15)
+    # no Cholesky factor: numpy's error, from either path
+    for compiled in (True, False):
+        with pytest.raises(np.linalg.LinAlgError):
+            ukf.predict(x, -np.eye(3), 0.1, 0.0, 0.1, NOISE, points, compiled)

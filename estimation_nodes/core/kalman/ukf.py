@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimation_nodes.core.compiled_loader import load_kernels
 from estimation_nodes.core.kalman import range_bearing, unicycle
 from estimation_nodes.core.kalman.ekf import Innovation, _symmetric
 from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, SensorPose
@@ -85,9 +86,38 @@ def _moved(points: FloatArray, v: float, w: float, dt: float) -> FloatArray:
                             (points[:, 2] + phi + math.pi) % TWO_PI - math.pi])
 
 
+COMPILED = "estimation_nodes.core.kalman.compiled"
+
+
+def prepare_compiled() -> bool:
+    """Compile (or load from numba's cache) the prediction's kernel now, not at the first
+    odometry message a node answers; False where numba does not import."""
+    return load_kernels(COMPILED) is not None
+
+
 def predict(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
-            noise: UnicycleNoise, points: SigmaPoints) -> tuple[FloatArray, FloatArray]:
-    """The pose and covariance after driving at (v, w) for dt seconds."""
+            noise: UnicycleNoise, points: SigmaPoints,
+            compiled: bool = True) -> tuple[FloatArray, FloatArray]:
+    """The pose and covariance after driving at (v, w) for dt seconds: the sigma points
+    of (x, P) moved, their mean and spread, plus the step's noise. With ``compiled`` and
+    numba at hand, kalman/compiled.py does it (odometry comes at 100 Hz, and numpy's
+    calls on 7 x 3 arrays cost more than their arithmetic); else ``predict_numpy``."""
+    v, w, dt = unicycle.check_motion(v, w, dt)
+    kernels = load_kernels(COMPILED) if compiled else None
+    if kernels is not None:
+        var_d, var_phi = noise.variances(v * dt, w * dt, dt)
+        x_next, P_next = np.empty(3), np.empty((3, 3))
+        if kernels.unscented_predict(x, P, v * dt, w * dt, points.scale, points.Wm,
+                                     points.Wc, var_d, var_phi, x_next, P_next):
+            return x_next, P_next
+    # numpy's path, which also names a P without a Cholesky factor (LinAlgError)
+    return predict_numpy(x, P, v, w, dt, noise, points)
+
+
+def predict_numpy(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
+                  noise: UnicycleNoise, points: SigmaPoints) -> tuple[FloatArray, FloatArray]:
+    """``predict`` over numpy arrays, as the filter reads in the books (the reference the
+    compiled kernel is tested equal to)."""
     v, w, dt = unicycle.check_motion(v, w, dt)
     moved = _moved(points.draw(x, P), v, w, dt)
     x_next = points.mean(moved, angle=2)

@@ -64,6 +64,10 @@ class UnicycleNoise:
 
 def check_motion(v: float, w: float, dt: float) -> tuple[float, float, float]:
     """Finite speeds and a finite dt >= 0, as floats; ValueError naming the bad one."""
+    # the usual case first, cheaply: a filter predicts at every odometry message
+    if isinstance(v, float) and isinstance(w, float) and isinstance(dt, float) \
+            and math.isfinite(v) and math.isfinite(w) and math.isfinite(dt) and dt >= 0:
+        return float(v), float(w), float(dt)
     v, w, dt = check_finite("v", v), check_finite("w", w), check_finite("dt", dt)
     if dt < 0:
         raise ValueError(f"dt: expected a time step >= 0, got {dt!r}")
