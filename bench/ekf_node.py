@@ -1,0 +1,285 @@
+"""The landmark filters through the running ekf_localizer: a UTIAS robot played into it,
+and its event -> pose latency at a camera's and an odometry's rates.
+
+    python bench/ekf_node.py run [--robot 1] [--filter ekf|ukf] [--rate 1] [--seconds S]
+    python bench/ekf_node.py latency [--filter ekf|ukf] [--seconds 30]
+
+``run``: what a user does with the dataset, through the real executables.
+``estimation_import utias`` makes the recording and the landmarks file,
+``ekf_localizer`` runs as its own process with msgs_config/robots/utias_mrclam.yaml
+(started at Vicon's pose at the first odometry message), and ``estimation_play``
+plays ``/odom`` and ``/landmark_observations`` into it at ``--rate`` times real time.
+Printed: the published poses scored against Vicon as bench/ekf_real.py scores the
+core's, and the largest difference from the core filter run offline on the same
+events (the clouds carry float32 coordinates, so about 1e-6 m is the floor).
+
+``latency``: a publisher in this process sends odometry at 100 Hz and camera frames
+at 30 Hz (a simulated unicycle among the UTIAS landmarks) to ekf_localizer; each
+published pose is paired by its stamp with the event that made it, and the time from
+the event's publication to the pose's arrival here is measured (DDS both ways
+included).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parent
+sys.path.insert(0, str(BENCH))
+from ekf_real import DATASET, PARAMS, file_figures, run_filter, score  # noqa: E402
+from real_log_node import executable, wait_for_line  # noqa: E402
+from ros_env import confine_ros  # noqa: E402
+from timing import table  # noqa: E402
+
+from estimation_nodes.params.landmarks import landmark_model  # noqa: E402
+from estimation_nodes.params.specs import LANDMARK_MODEL_SPECS, spec_defaults  # noqa: E402
+from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
+from estimation_nodes.tools.importers.utias import read_run  # noqa: E402
+
+#: Rates of the latency run (Hz): odometry, camera frames.
+ODOM_HZ, FRAME_HZ = 100.0, 30.0
+
+
+class PoseWatcher:
+    """The bench's node: keeps every pose by stamp, with its arrival time."""
+
+    def __init__(self) -> None:
+        from diagnostic_msgs.msg import DiagnosticArray
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.node import Node
+
+        from estimation_nodes.nodes.qos import latched_qos
+
+        self.node = Node("ekf_node_bench")
+        self.poses: dict[int, tuple[np.ndarray, np.ndarray, float]] = {}
+        self.diagnostics: dict[str, str] = {}
+        self.node.create_subscription(PoseWithCovarianceStamped, "pose", self._on_pose,
+                                      latched_qos(1000))
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics,
+                                      10)
+        self.executor = SingleThreadedExecutor()
+        self.executor.add_node(self.node)
+
+    def _on_pose(self, msg) -> None:
+        from estimation_nodes.nodes.grid_messages import planar_pose
+
+        arrived = time.perf_counter()
+        stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
+        c = np.array(msg.pose.covariance).reshape(6, 6)
+        covariance = c[np.ix_([0, 1, 5], [0, 1, 5])]
+        self.poses[stamp] = (np.array(planar_pose(msg.pose.pose)), covariance, arrived)
+
+    def _on_diagnostics(self, msg) -> None:
+        if msg.status and msg.status[0].name.startswith("ekf_localizer"):
+            self.diagnostics = {v.key: v.value for v in msg.status[0].values}
+
+    def spin(self, condition, timeout: float) -> bool:
+        return spin_until(self.executor, condition, timeout)
+
+    def counts(self) -> str:
+        """What the node says it did with the events and observations."""
+        return ", ".join(f"{k} {v}" for k, v in self.diagnostics.items()
+                         if k.startswith(("handled.", "rejected.", "observations."))) or "-"
+
+
+def start_localizer(work: Path, kind: str, initial: np.ndarray,
+                    landmarks_file: Path, env: dict) -> subprocess.Popen:
+    localizer = subprocess.Popen(
+        [executable("ekf_localizer"), "--ros-args", "--params-file", str(PARAMS),
+         "-p", f"landmarks_file:={landmarks_file}", "-p", f"filter:={kind}",
+         "-p", "initial_pose:=[" + ", ".join(repr(float(v)) for v in initial) + "]"],
+        env=env, stdout=(work / "localizer.log").open("w"), stderr=subprocess.STDOUT)
+    if not wait_for_line(localizer, work / "localizer.log", "ready:", 120):
+        stop_process(localizer)
+        sys.exit("ekf_node: the localizer never said ready:\n"
+                 + (work / "localizer.log").read_text())
+    return localizer
+
+
+def run_robot(args: argparse.Namespace, work: Path) -> None:
+    import rclpy
+
+    run = read_run(args.dataset, args.robot)
+    recording = work / "robot.mcap"
+    subprocess.run([executable("estimation_import"), "utias", str(args.dataset), "--robot",
+                    str(args.robot), "-o", str(recording)], check=True,
+                   stdout=subprocess.DEVNULL)
+    first_odometry = run.odometry[0, 0]
+    initial = np.array([np.interp(first_odometry, run.truth[:, 0], run.truth[:, i])
+                        for i in (1, 2)] + [_heading_at(run, first_odometry)])
+    env = confine_ros(84)
+    localizer = start_localizer(work, args.filter, initial,
+                                recording.with_suffix(".landmarks.yaml"), env)
+    rclpy.init()
+    watcher = PoseWatcher()
+    play = None
+    try:
+        play = subprocess.Popen(
+            [executable("estimation_play"), str(recording), "--rate", f"{args.rate:g}",
+             "--topics", "/odom", "/landmark_observations", "--wait-for-subscribers", "30",
+             "--delay", "2"], env=env, stdout=(work / "play.log").open("w"),
+            stderr=subprocess.STDOUT)
+        span = run.odometry[-1, 0] - first_odometry
+        limit = args.seconds or span / args.rate + 60
+        watcher.spin(lambda: play.poll() is not None, limit)
+        if play.poll() is None:
+            stop_process(play)
+        watcher.spin(lambda: False, 3.0)
+    finally:
+        if play is not None and play.poll() is None:
+            stop_process(play)
+        stop_process(localizer)
+        watcher.node.destroy_node()
+        rclpy.try_shutdown()
+    report_robot(args, run, initial, watcher)
+
+
+def _heading_at(run, t: float) -> float:
+    heading = np.unwrap(run.truth[:, 3])
+    return math.remainder(float(np.interp(t, run.truth[:, 0], heading)), 2 * math.pi)
+
+
+def report_robot(args, run, initial: np.ndarray, watcher: PoseWatcher) -> None:
+    stamps = sorted(watcher.poses)
+    if not stamps:
+        sys.exit("ekf_node: no pose was published")
+    times = np.array(stamps) / 1e9
+    poses = np.array([watcher.poses[s][0] for s in stamps])
+    covariances = np.array([watcher.poses[s][1] for s in stamps])
+    # scored over what was played (--seconds may play the first part only)
+    played = replace(run, truth=run.truth[run.truth[:, 0] <= times[-1]])
+    node = score(played, times, poses, covariances)
+    # the core on the same events, from the same start, compared at the node's stamps
+    model = landmark_model({**spec_defaults(LANDMARK_MODEL_SPECS), **file_figures(PARAMS),
+                            "filter": args.filter}, run.landmarks)
+    started = replace_truth_start(run, initial)
+    core_times, core_poses, _, _, _ = run_filter(started, model, np.diag([0.01] * 3))
+    index = np.searchsorted(core_times, times, side="right") - 1
+    difference = np.hypot(*(core_poses[index, :2] - poses[:, :2]).T)
+    rows = [["poses published", str(len(stamps))],
+            ["position RMSE", f"{node['position_rmse']:.3f} m"],
+            ["heading RMSE", f"{node['heading_rmse_deg']:.1f} deg"],
+            ["truth in 95% ellipse", f"{node['in_ellipse']:.0%}"],
+            ["longest > 0.5 m", f"{node['longest_off_s']:.1f} s"],
+            ["largest difference from the core", f"{difference.max():.2e} m"],
+            ["the node's counts", watcher.counts()]]
+    print(f"ekf_localizer ({args.filter.upper()}) on robot {args.robot}, played at "
+          f"{args.rate:g}x, through DDS")
+    print(table(["figure", "value"], rows))
+
+
+def replace_truth_start(run, initial: np.ndarray):
+    """The run as run_filter reads it, starting at ``initial`` at the first odometry."""
+    first = np.array([[run.odometry[0, 0], *initial]])
+    return replace(run, truth=np.vstack([first, run.truth[run.truth[:, 0] > first[0, 0]]]))
+
+
+def run_latency(args: argparse.Namespace, work: Path) -> None:
+    import rclpy
+    from nav_msgs.msg import Odometry
+    from sensor_msgs.msg import PointCloud2
+
+    from estimation_nodes.core.kalman import range_bearing
+    from estimation_nodes.core.kalman.range_bearing import SensorPose
+    from estimation_nodes.core.kalman.unicycle import move
+    from estimation_nodes.nodes.landmark_messages import landmark_cloud
+    from estimation_nodes.nodes.stamps import set_stamp
+
+    run = read_run(args.dataset, 1)
+    landmarks_file = work / "landmarks.yaml"
+    landmarks_file.write_text("landmarks:\n" + "".join(
+        f"  - {{id: {key}, x: {x!r}, y: {y!r}}}\n" for key, (x, y) in run.landmarks.items()))
+    start = np.array([1.0, 0.0, 0.0])
+    env = confine_ros(85)
+    localizer = start_localizer(work, args.filter, start, landmarks_file, env)
+    rclpy.init()
+    watcher = PoseWatcher()
+    odom_pub = watcher.node.create_publisher(Odometry, "odom", 100)
+    frame_pub = watcher.node.create_publisher(PointCloud2, "landmark_observations", 100)
+    sent: dict[int, tuple[str, float]] = {}
+    pose, t0 = start.copy(), time.time()
+    state = {"step": 0}
+    sensor = SensorPose(0.0, 0.0, 0.0)
+
+    def tick() -> None:
+        # odometry at 100 Hz; a camera frame every third or fourth tick (30 Hz)
+        nonlocal pose
+        step = state["step"]
+        state["step"] += 1
+        t_ns = int((t0 + step / ODOM_HZ) * 1e9)
+        v, w = 0.2, 0.3 * math.sin(step / 300)
+        pose = move(pose, v, w, 1 / ODOM_HZ)
+        msg = Odometry()
+        set_stamp(msg.header, t_ns, "odom")
+        msg.twist.twist.linear.x, msg.twist.twist.angular.z = v, w
+        sent[t_ns] = ("odom", time.perf_counter())
+        odom_pub.publish(msg)
+        if int((step + 1) * FRAME_HZ / ODOM_HZ) > int(step * FRAME_HZ / ODOM_HZ):
+            seen = []
+            for key, landmark in run.landmarks.items():
+                r, b = range_bearing.expected(pose, landmark, sensor)
+                if abs(b) < 0.5:
+                    seen.append((key, r, b))
+            frame_ns = t_ns + 1000   # a stamp of its own, after the odometry's
+            sent[frame_ns] = ("frame", time.perf_counter())
+            frame_pub.publish(landmark_cloud(frame_ns, "camera", seen))
+
+    try:
+        watcher.spin(lambda: odom_pub.get_subscription_count() > 0
+                     and frame_pub.get_subscription_count() > 0, 30)
+        watcher.spin(lambda: False, 1.0)
+        timer = watcher.node.create_timer(1 / ODOM_HZ, tick)
+        watcher.spin(lambda: False, args.seconds)
+        timer.cancel()
+        watcher.spin(lambda: False, 2.0)
+    finally:
+        stop_process(localizer)
+        watcher.node.destroy_node()
+        rclpy.try_shutdown()
+    rows = []
+    for kind in ("odom", "frame"):
+        latencies = np.array([1e3 * (watcher.poses[s][2] - at) for s, (k, at) in sent.items()
+                              if k == kind and s in watcher.poses])
+        count = sum(1 for k, _ in sent.values() if k == kind)
+        if latencies.size:
+            p50, p99 = np.percentile(latencies, [50, 99])
+            rows.append([kind, f"{count}", f"{latencies.size}", f"{p50:.2f}", f"{p99:.2f}",
+                         f"{latencies.max():.2f}"])
+    print(f"ekf_localizer ({args.filter.upper()}): odometry at {ODOM_HZ:g} Hz, frames at "
+          f"{FRAME_HZ:g} Hz for {args.seconds:g} s; event published -> pose received")
+    print(table(["event", "sent", "poses paired", "p50 ms", "p99 ms", "max ms"], rows))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("mode", choices=("run", "latency"))
+    parser.add_argument("--dataset", type=Path, default=DATASET)
+    parser.add_argument("--robot", type=int, default=1)
+    parser.add_argument("--filter", choices=("ekf", "ukf"), default="ekf")
+    parser.add_argument("--rate", type=float, default=1.0,
+                        help="play at this many times real time (run)")
+    parser.add_argument("--seconds", type=float, default=0.0,
+                        help="run: play only this long; latency: default 30")
+    args = parser.parse_args()
+    if not args.dataset.is_dir():
+        sys.exit(f"ekf_node: no dataset at {args.dataset} (see ../shared/data/README.md)")
+    with tempfile.TemporaryDirectory() as work:
+        if args.mode == "run":
+            run_robot(args, Path(work))
+        else:
+            args.seconds = args.seconds or 30.0
+            run_latency(args, Path(work))
+
+
+if __name__ == "__main__":
+    main()
