@@ -36,7 +36,7 @@ import numpy as np
 BENCH = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH))
 from ekf_real import DATASET, PARAMS, file_figures, run_filter, score  # noqa: E402
-from real_log_node import executable, wait_for_line  # noqa: E402
+from real_log_node import end_run, executable, wait_for_line  # noqa: E402
 from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
@@ -136,11 +136,7 @@ def run_robot(args: argparse.Namespace, work: Path) -> None:
             stop_process(play)
         watcher.spin(lambda: False, 3.0)
     finally:
-        if play is not None and play.poll() is None:
-            stop_process(play)
-        stop_process(localizer)
-        watcher.node.destroy_node()
-        rclpy.try_shutdown()
+        end_run(play, localizer, watcher.node)
     report_robot(args, run, initial, watcher)
 
 
@@ -243,9 +239,7 @@ def run_latency(args: argparse.Namespace, work: Path) -> None:
         timer.cancel()
         watcher.spin(lambda: False, 2.0)
     finally:
-        stop_process(localizer)
-        watcher.node.destroy_node()
-        rclpy.try_shutdown()
+        end_run(None, localizer, watcher.node)
     rows = []
     for kind in ("odom", "frame"):
         latencies = np.array([1e3 * (watcher.poses[s][2] - at) for s, (k, at) in sent.items()

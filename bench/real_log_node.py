@@ -161,12 +161,19 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
         watcher.spin(lambda: False, 3.0)     # the last update and diagnostics
         peak = peak_mib(localizer.pid)
     finally:
-        if play is not None and play.poll() is None:
-            stop_process(play)
-        stop_process(localizer)
-        watcher.node.destroy_node()
-        rclpy.try_shutdown()
+        end_run(play, localizer, watcher.node)
     return summary(log, watcher, rate, played_s, peak)
+
+
+def end_run(play: subprocess.Popen | None, localizer: subprocess.Popen, node) -> None:
+    """Stop the play (if it still runs) and the node, each by its pid; rclpy shut down."""
+    import rclpy
+
+    if play is not None and play.poll() is None:
+        stop_process(play)
+    stop_process(localizer)
+    node.destroy_node()
+    rclpy.try_shutdown()
 
 
 def wait_for_line(process: subprocess.Popen, output: Path, text: str,
