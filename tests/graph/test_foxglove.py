@@ -62,7 +62,7 @@ def test_ros2_run_finds_foxglove_view_and_the_layouts_are_installed():
     assert (path / "foxglove_view").stat().st_mode & stat.S_IXUSR
     share = Path(get_package_share_directory("estimation_nodes")) / "foxglove"
     assert {p.name for p in share.glob("*.json")} == {
-        "tile_world.json", "tracking_2d.json", "grid_localization.json"}
+        "tile_world.json", "tracking_2d.json", "grid_localization.json", "landmarks.json"}
 
 
 @pytest.mark.timeout(240)

@@ -183,7 +183,10 @@ LIVE = {t if t.startswith("/") else f"/{t}" for t in topics.LIVE_TOPIC_TYPES}
 #: What the grid localizer and its simulated robot will publish (issue 13): the layout
 #: ships before the nodes.
 GRID = {"/map", "/belief_map", "/pose", "/true_pose", "/localization_quality", "/diagnostics"}
-LAYOUTS = {"tile_world.json": LIVE, "tracking_2d.json": LIVE, "grid_localization.json": GRID}
+#: What ekf_localizer and landmark_robot publish that a layout can show.
+LANDMARKS = {"/pose", "/true_pose", "/odom", "/landmark_observations", "/diagnostics"}
+LAYOUTS = {"tile_world.json": LIVE, "tracking_2d.json": LIVE, "grid_localization.json": GRID,
+           "landmarks.json": LANDMARKS}
 PANEL_TYPES = {"Plot", "3D", "StateTransitions", "DiagnosticSummary", "DiagnosticStatusPanel"}
 
 

@@ -218,10 +218,6 @@ def run_grid_scenario(params: Path, args: argparse.Namespace, kind: str) -> int:
         print(f"estimation_demo: --in-process is not available for {kind} runs",
               file=sys.stderr)
         return 2
-    if kind == "landmarks" and args.plot:
-        print("estimation_demo: --plot is not available for landmarks runs yet",
-              file=sys.stderr)
-        return 2
     if args.plot and not args.record:
         # The picture is drawn from a recording of the run.
         args.record = args.plot.with_suffix(".mcap")
@@ -243,10 +239,19 @@ def run_grid_scenario(params: Path, args: argparse.Namespace, kind: str) -> int:
     if args.record:
         print(f"estimation_demo: recorded to {args.record}")
     if args.plot and code == 0:
-        from estimation_nodes.tools.plot.grid_localizer import render_grid
-
-        print(f"estimation_demo: plot written to {render_grid(args.record, args.plot)}")
+        print(f"estimation_demo: plot written to {render_run(args, kind)}")
     return code
+
+
+def render_run(args: argparse.Namespace, kind: str) -> Path:
+    """The picture of a recorded grid or landmarks run (tools/plot/)."""
+    if kind == "landmarks":
+        from estimation_nodes.tools.plot.landmarks import render_landmarks
+
+        return render_landmarks(args.record, args.plot)
+    from estimation_nodes.tools.plot.grid_localizer import render_grid
+
+    return render_grid(args.record, args.plot)
 
 
 def make_sinks(params: Path, args: argparse.Namespace, recorded: dict[str, str] | None = None,

@@ -178,12 +178,23 @@ def main(argv: list[str] | None = None) -> None:
     from estimation_nodes.tools.recording.mcap import RecordingError, read_recording
 
     if args.recording.is_file():
-        from estimation_nodes.tools.replay.grid_localizer import is_grid_recording
+        from estimation_nodes.tools.replay.grid_localizer import recorded_kind
 
-        if is_grid_recording(args.recording):
+        kind = recorded_kind(args.recording)
+        if kind == "grid":
             from estimation_nodes.tools.plot.grid_localizer import render_grid
 
             print(f"estimation_plot: wrote {render_grid(args.recording, args.output)}")
+            return
+        if kind == "landmarks":
+            from estimation_nodes.tools.plot.landmarks import render_landmarks
+
+            try:
+                written = render_landmarks(args.recording, args.output)
+            except ValueError as error:
+                print(f"estimation_plot: {error}", file=sys.stderr)
+                sys.exit(2)
+            print(f"estimation_plot: wrote {written}")
             return
     try:
         record = read_recording(args.recording).record
