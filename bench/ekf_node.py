@@ -11,7 +11,7 @@ and its event -> pose latency at a camera's and an odometry's rates.
 plays ``/odom`` and ``/landmark_observations`` into it at ``--rate`` times real time.
 Printed: the published poses scored against Vicon as bench/ekf_real.py scores the
 core's, and the largest difference from the core filter run offline on the same
-events (the clouds carry float32 coordinates, so about 1e-6 m is the floor).
+events, their observations read as the node reads them (float32 coordinates).
 
 ``latency``: a publisher in this process sends odometry at 100 Hz and camera frames
 at 30 Hz (a simulated unicycle among the UTIAS landmarks) to ekf_localizer; each
@@ -155,10 +155,11 @@ def report_robot(args, run, initial: np.ndarray, watcher: PoseWatcher) -> None:
     # scored over what was played (--seconds may play the first part only)
     played = replace(run, truth=run.truth[run.truth[:, 0] <= times[-1]])
     node = score(played, times, poses, covariances)
-    # the core on the same events, from the same start, compared at the node's stamps
+    # the core on the same events as the node received them, from the same start,
+    # compared at the node's stamps
     model = landmark_model({**spec_defaults(LANDMARK_MODEL_SPECS), **file_figures(PARAMS),
                             "filter": args.filter}, run.landmarks)
-    started = replace_truth_start(run, initial)
+    started = as_received(replace_truth_start(run, initial))
     core_times, core_poses, _, _, _ = run_filter(started, model, np.diag([0.01] * 3))
     index = np.searchsorted(core_times, times, side="right") - 1
     difference = np.hypot(*(core_poses[index, :2] - poses[:, :2]).T)
@@ -172,6 +173,17 @@ def report_robot(args, run, initial: np.ndarray, watcher: PoseWatcher) -> None:
     print(f"ekf_localizer ({args.filter.upper()}) on robot {args.robot}, played at "
           f"{args.rate:g}x, through DDS")
     print(table(["figure", "value"], rows))
+
+
+def as_received(run):
+    """The run with each detection's range and bearing as the node reads them from a
+    landmark cloud: x = range cos(bearing), y = range sin(bearing) in float32, and back."""
+    detections = run.detections.copy()
+    r, b = detections[:, 2], detections[:, 3]
+    x = (r * np.cos(b)).astype(np.float32).astype(np.float64)
+    y = (r * np.sin(b)).astype(np.float32).astype(np.float64)
+    detections[:, 2], detections[:, 3] = np.hypot(x, y), np.arctan2(y, x)
+    return replace(run, detections=detections)
 
 
 def replace_truth_start(run, initial: np.ndarray):

@@ -1,0 +1,149 @@
+"""A real building's map, a laser at a steady 10 Hz, the running grid_localizer: how many
+scans it answers.
+
+    python bench/laser_rate_node.py [--log intel|aces|PATH] [--rate-hz 10] [--seconds 60]
+
+The corrected CARMEN logs keep a scan every 3 s or so; played faster they come in
+bursts (bench/real_log_node.py). Here the scans are a laser's: ``planar_robot`` drives
+a simulated robot through the map ``estimation_map`` makes from the log (0.05 m), from
+the log's first corrected pose, and casts a scan at every step, ``--rate-hz`` steps a
+second, each stamped with its ``scan_time``, so the localizer counts exactly the scans
+it never saw. ``grid_localizer`` (0.1 m, 72 headings) tracks it from that pose.
+
+Printed: the scans sent, and what the node says it did with them (received, missed,
+updates, busy share, update time), the scans answered per second, its peak memory, and
+the published poses against the simulator's true poses (paired by stamp).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+BENCH = Path(__file__).resolve().parent
+sys.path.insert(0, str(BENCH))
+sys.path.insert(1, str(BENCH.parent))
+from real_buildings import LOGS, NEAR_M, NEAR_RAD, RANGE_MAX  # noqa: E402
+from real_log_node import (  # noqa: E402
+    Watcher,
+    end_run,
+    executable,
+    peak_mib,
+    prepare,
+    wait_for_line,
+)
+from ros_env import confine_ros  # noqa: E402
+from timing import table  # noqa: E402
+
+from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
+from estimation_nodes.tools.importers import carmen  # noqa: E402
+
+#: The simulated laser's beams over a full turn (the localizer scores laser_beams of them).
+BEAMS = 360
+
+
+def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]:
+    import rclpy
+    from geometry_msgs.msg import PoseStamped
+
+    from estimation_nodes.nodes.grid_messages import planar_pose
+    from estimation_nodes.nodes.qos import latched_qos
+
+    start = carmen.read_log(log_path).scans[0].pose
+    _, map_yaml = prepare(log_path, work)
+    env = confine_ros(86)
+    grid = ["-p", f"map_file:={map_yaml}", "-p", "resolution:=0.1", "-p", "heading_bins:=72",
+            "-p", f"laser_max_range:={RANGE_MAX}"]
+    localizer = subprocess.Popen(
+        [executable("grid_localizer"), "--ros-args", *grid, "-p", "max_states:=200000000",
+         "-p", "diagnostics_period:=0.5"],
+        env=env, stdout=(work / "localizer.log").open("w"), stderr=subprocess.STDOUT)
+    rclpy.init()
+    watcher = Watcher()
+    truths: dict[int, tuple[float, float, float]] = {}
+    watcher.node.create_subscription(
+        PoseStamped, "true_pose",
+        lambda m: truths.__setitem__(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec,
+                                     planar_pose(m.pose)), latched_qos(1000))
+    robot = None
+    try:
+        if not wait_for_line(localizer, work / "localizer.log", "ready:", 300):
+            sys.exit("laser_rate_node: the localizer never said ready:\n"
+                     + (work / "localizer.log").read_text())
+        watcher.spin(lambda: watcher.initial.get_subscription_count() > 0 and watcher.poses,
+                     60)
+        count = len(watcher.poses)
+        watcher.give_initial_pose(start)
+        watcher.spin(lambda: len(watcher.poses) > count, 30)
+        robot = subprocess.Popen(
+            [executable("planar_robot"), "--ros-args", *grid, "-p", "seed:=3",
+             "-p", f"rate_hz:={args.rate_hz}", "-p", f"beams:={BEAMS}",
+             "-p", "initial_pose:=[" + ", ".join(repr(float(v)) for v in start) + "]",
+             "-p", f"duration:={args.seconds}", "-p", "exit_when_done:=true"],
+            env=env, stdout=(work / "robot.log").open("w"), stderr=subprocess.STDOUT)
+        started = time.monotonic()
+        watcher.spin(lambda: robot.poll() is not None, args.seconds + 120)
+        driven_s = time.monotonic() - started
+        watcher.spin(lambda: False, 3.0)     # the last update and diagnostics
+        peak = peak_mib(localizer.pid)
+    finally:
+        if robot is not None and robot.poll() is None:
+            stop_process(robot)
+        end_run(None, localizer, watcher.node)
+    return summary(args, watcher, truths, driven_s, peak)
+
+
+def summary(args, watcher: Watcher, truths: dict, driven_s: float,
+            peak: float) -> list[list[str]]:
+    paired = [(pose, truths[stamp]) for stamp, pose in watcher.poses.items()
+              if stamp in truths]
+    errors = np.array([math.hypot(p[0] - t[0], p[1] - t[1]) for p, t in paired])
+    turns = np.array([abs(math.remainder(p[2] - t[2], 2 * math.pi)) for p, t in paired])
+    d = watcher.diagnostics
+    updates = int(d.get("handled.scan", 0))
+    sent = int(round(args.seconds * args.rate_hz))
+    return [
+        ["scans sent (steps of the simulated robot)", f"{sent} at {args.rate_hz:g} Hz"],
+        ["received / missed (from scan_time)", f"{d.get('scans_received', '?')} / "
+         f"{d.get('scans_missed', '?')}"],
+        ["updates / not due (no motion)", f"{updates} / "
+         f"{d.get('handled.scan_without_motion', 0)}"],
+        ["scans answered per second", f"{updates / args.seconds:.1f}"],
+        ["busy (share of the time updating)", f"{d.get('busy_percent', '?')} %"],
+        ["update, median / max (node's own)", f"{d.get('update_ms_median', '?')} / "
+         f"{d.get('update_ms_max', '?')} ms"],
+        ["localizer peak RSS (VmHWM)", f"{peak:.0f} MiB"],
+        ["wall time of the drive", f"{driven_s:.1f} s"],
+        ["poses paired with a true pose", str(len(paired))],
+        ["within 0.2 m and 5 deg", f"{100 * np.mean((errors <= NEAR_M) & (turns <= NEAR_RAD)):.1f}"
+         " %" if paired else "-"],
+        ["median error", f"{100 * np.median(errors):.1f} cm, "
+         f"{math.degrees(np.median(turns)):.1f} deg" if paired else "-"],
+    ]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--log", default="intel", help="intel, aces or a CARMEN log's path")
+    parser.add_argument("--rate-hz", type=float, default=10.0)
+    parser.add_argument("--seconds", type=float, default=60.0)
+    args = parser.parse_args()
+    log_path = LOGS.get(args.log, Path(args.log))
+    if not log_path.exists():
+        sys.exit(f"laser_rate_node: no log at {log_path} (see ../shared/data/README.md)")
+    with tempfile.TemporaryDirectory() as work:
+        rows = run(args, log_path, Path(work))
+    print(f"grid_localizer on the map of {log_path.name}, a simulated laser at "
+          f"{args.rate_hz:g} Hz for {args.seconds:g} s, through DDS")
+    print(table(["figure", "value"], rows))
+
+
+if __name__ == "__main__":
+    main()
