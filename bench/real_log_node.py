@@ -2,6 +2,7 @@
 
     python bench/real_log_node.py [--log intel|aces|PATH] [--scan-rate 10]
         [--resolution 0.1] [--heading-bins 72] [--max-odom-jump 5] [--seconds S]
+        [--picture FILE.png] [--keep DIR]
 
 What a user does with a CARMEN log, through the real executables: ``estimation_import
 carmen`` makes a recording, ``estimation_map`` a map from its corrected poses (0.05 m),
@@ -162,7 +163,43 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
         peak = peak_mib(localizer.pid)
     finally:
         end_run(play, localizer, watcher.node)
+    if args.picture:
+        draw(log, watcher, map_yaml, args.picture, log_path.name)
     return summary(log, watcher, rate, played_s, peak)
+
+
+def draw(log, watcher: Watcher, map_yaml: Path, output: Path, name: str) -> None:
+    """The map, the log's corrected path and the node's published poses, one PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from estimation_nodes.params.map_files import read_map_file
+
+    occupancy = read_map_file(map_yaml)
+    rows, cols = occupancy.cells.shape
+    x0, y0 = occupancy.origin
+    extent = (x0, x0 + cols * occupancy.resolution, y0, y0 + rows * occupancy.resolution)
+    cells = occupancy.cells
+    shade = np.where(cells >= 50, 0.0, np.where(cells < 0, 0.75, 1.0))
+    truth = np.array([scan.pose for scan in log.scans])
+    estimates = np.array([watcher.poses[s] for s in sorted(watcher.poses)])
+    figure, ax = plt.subplots(figsize=(10, 10 * rows / cols + 0.6), dpi=100)
+    ax.imshow(shade, origin="lower", extent=extent, cmap="gray", vmin=0, vmax=1)
+    ax.plot(truth[:, 0], truth[:, 1], color="#d62728", linewidth=1.0,
+            label="corrected path (the log's SLAM)")
+    ax.scatter(estimates[:, 0], estimates[:, 1], s=4, color="#1f77b4", zorder=3,
+               label=f"grid_localizer's poses ({len(estimates)})")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.legend(loc="upper right", fontsize=9)
+    ax.set_title(f"{name}: the map made from the corrected poses, the corrected path, "
+                 f"the node's estimates")
+    figure.tight_layout()
+    figure.savefig(output)
+    plt.close(figure)
+    print(f"real_log_node: picture written to {output}")
 
 
 def end_run(play: subprocess.Popen | None, localizer: subprocess.Popen, node) -> None:
@@ -227,6 +264,8 @@ def main() -> None:
                         help="the localizer's max_odom_jump (m; default: %(default)s)")
     parser.add_argument("--seconds", type=float, default=0.0,
                         help="play only this long (default: the whole log)")
+    parser.add_argument("--picture", type=Path, metavar="FILE.png",
+                        help="draw the map, the corrected path and the node's poses")
     parser.add_argument("--keep", type=Path, metavar="DIR",
                         help="make the recording, map and the processes' logs in DIR and "
                              "keep them (default: a temporary folder)")

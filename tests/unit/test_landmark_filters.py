@@ -22,7 +22,7 @@ from estimation_nodes.core.kalman.landmarks import (
     Observation,
     chi_square_2_quantile,
 )
-from estimation_nodes.core.kalman.range_bearing import SensorPose
+from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, SensorPose
 from estimation_nodes.core.kalman.unicycle import UnicycleNoise, wrap
 
 DATASET = Path(__file__).resolve().parents[3] / "shared" / "data" / "utias" / "MRCLAM_Dataset7"
@@ -110,10 +110,10 @@ def dataset_events(robot: int, seconds: float):
     return events, run.landmarks, run.truth[0, 1:]
 
 
-def ours(kind, events, landmarks, x0):
+def ours(kind, events, landmarks, x0, ranging=EUCLIDEAN):
     points = ukf.SigmaPoints(0.5, 2.0, 0.0) if kind == "ukf" else None
     model = LandmarkModel(kind, NOISE, 0.12, 0.0, 0.027, SENSOR, landmarks, 1.0, 5.0, (1.0, 0.5),
-                          points)
+                          points, ranging)
     localization = LandmarkLocalization(model, x0, np.diag([0.04, 0.04, 0.02]), 0.0)
     for t, kind_, data in events:
         if kind_ == "odom":
@@ -133,7 +133,7 @@ class NonlinearEKF(ExtendedKalmanFilter):
         self.x = unicycle.move(self.x, *self.twist, self.dt)
 
 
-def filterpy_nonlinear_ekf(events, landmarks, x0):
+def filterpy_nonlinear_ekf(events, landmarks, x0, ranging=EUCLIDEAN):
     f = NonlinearEKF(dim_x=3, dim_z=2)
     f.x, f.P, f.R = np.array(x0, float), np.diag([0.04, 0.04, 0.02]), R
     time = 0.0
@@ -152,8 +152,8 @@ def filterpy_nonlinear_ekf(events, landmarks, x0):
         for seen in data:
             landmark = landmarks[seen.landmark]
             f.update(np.array([seen.range, seen.bearing]),
-                     lambda s, lm=landmark: range_bearing.jacobian(s, lm, SENSOR),
-                     lambda s, lm=landmark: range_bearing.expected(s, lm, SENSOR),
+                     lambda s, lm=landmark: range_bearing.jacobian(s, lm, SENSOR, ranging),
+                     lambda s, lm=landmark: range_bearing.expected(s, lm, SENSOR, ranging),
                      residual=range_bearing.residual)
             f.x[2] = wrap(f.x[2])
     return f.x, f.P
@@ -166,14 +166,14 @@ def angle_mean(points, weights, angle):
     return mean
 
 
-def filterpy_ukf(events, landmarks, x0):
+def filterpy_ukf(events, landmarks, x0, ranging=EUCLIDEAN):
     points = MerweScaledSigmaPoints(3, alpha=0.5, beta=2.0, kappa=0.0,
                                     subtract=lambda a, b: np.r_[a[:2] - b[:2], wrap(a[2] - b[2])])
     state = {"twist": (0.0, 0.0)}
     f = UnscentedKalmanFilter(
         dim_x=3, dim_z=2, dt=0.0, points=points,
         fx=lambda s, dt: unicycle.move(s, *state["twist"], dt),
-        hx=lambda s, lm: range_bearing.expected(s, lm, SENSOR),
+        hx=lambda s, lm: range_bearing.expected(s, lm, SENSOR, ranging),
         x_mean_fn=lambda p, wm: angle_mean(p, wm, 2),
         z_mean_fn=lambda p, wm: angle_mean(p, wm, 1),
         residual_x=lambda a, b: np.r_[a[:2] - b[:2], wrap(a[2] - b[2])],
@@ -217,12 +217,14 @@ def test_the_ukf_equals_filterpy_on_a_simulated_run(seed):
 
 
 @pytest.mark.skipif(not DATASET.is_dir(), reason=f"the UTIAS dataset is not at {DATASET}")
+@pytest.mark.parametrize("ranging", [EUCLIDEAN, Ranging("depth", 1.035)],
+                         ids=["distance", "depth"])
 @pytest.mark.parametrize("kind", ["ekf", "ukf"])
-def test_both_filters_equal_filterpy_over_a_whole_real_run(kind):
+def test_both_filters_equal_filterpy_over_a_whole_real_run(kind, ranging):
     events, landmarks, x0 = dataset_events(1, seconds=1e9)
-    x, P = ours(kind, events, landmarks, x0)
+    x, P = ours(kind, events, landmarks, x0, ranging)
     reference = filterpy_nonlinear_ekf if kind == "ekf" else filterpy_ukf
-    fx, fP = reference(events, landmarks, x0)
+    fx, fP = reference(events, landmarks, x0, ranging)
     np.testing.assert_allclose(x, fx, atol=1e-9)
     np.testing.assert_allclose(P, fP, atol=1e-9)
 
