@@ -184,39 +184,43 @@ class LandmarkLocalization:
         ``t`` with the twists before it."""
         if not (math.isfinite(v) and math.isfinite(w)):
             raise ValueError(f"odometry: expected finite speeds, got v={v!r}, w={w!r}")
-        self._predict_to(t)
+        now = self._predict_to(t)
         forward, turn = self.model.odometry_scale
         twist = (float(v) * forward, float(w) * turn)
         if self.model.odometry_delay == 0:
             self.twist = twist
         else:
-            self._coming.append((self.t + self.model.odometry_delay, twist))
+            self._coming.append((now + self.model.odometry_delay, twist))
 
     def on_frame(self, t: float, observations: Iterable[Observation]) -> list[Outcome]:
         """A camera frame at ``t``: predict to it, then apply each observation."""
         self._predict_to(t)
         return [self._observe(observation) for observation in observations]
 
-    def _predict_to(self, t: float) -> None:
+    def _predict_to(self, t: float) -> float:
+        """The estimate predicted to ``t``; the filter's time after it (``t``, or a later
+        one for a late event)."""
         if not math.isfinite(t):
             raise ValueError(f"t: expected a finite time, got {t!r}")
         if self.t is None:
             self.t = self._last_used = t
-            return
+            return t
         if t < self.t:
             # A late event is applied at the filter's time (causal_order.py puts them
             # in order first; what it cannot is counted).
             self.counts["late"] += 1
-            return
+            return self.t
         while self._coming and self._coming[0][0] <= t:
             start, twist = self._coming.popleft()
-            self._drive_to(start)
+            self._drive_to(self.t, start)
             self.twist = twist
-        self._drive_to(t)
+        self._drive_to(self.t, t)
+        return t
 
-    def _drive_to(self, t: float) -> None:
-        """The pose predicted to ``t`` with the twist in force."""
-        dt = t - self.t
+    def _drive_to(self, now: float, t: float) -> None:
+        """The pose predicted from the filter's time ``now`` to ``t`` with the twist in
+        force."""
+        dt = t - now
         if dt <= 0:
             return
         v, w = self.twist
