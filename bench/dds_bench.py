@@ -221,7 +221,7 @@ def main() -> None:
                         help="keep the driver on one CPU and the node on the others")
     args = parser.parse_args()
     placement = pin_cores() if args.pin else "not pinned"
-    env = confine_ros(77)
+    env = confine_ros(81)
     import rclpy
 
     rclpy.init()

@@ -117,7 +117,7 @@ def run_robot(args: argparse.Namespace, work: Path) -> None:
     first_odometry = run.odometry[0, 0]
     initial = np.array([np.interp(first_odometry, run.truth[:, 0], run.truth[:, i])
                         for i in (1, 2)] + [_heading_at(run, first_odometry)])
-    env = confine_ros(84)
+    env = confine_ros(88)
     localizer = start_localizer(work, args.filter, initial,
                                 recording.with_suffix(".landmarks.yaml"), env)
     rclpy.init()
@@ -208,7 +208,7 @@ def run_latency(args: argparse.Namespace, work: Path) -> None:
     landmarks_file.write_text("landmarks:\n" + "".join(
         f"  - {{id: {key}, x: {x!r}, y: {y!r}}}\n" for key, (x, y) in run.landmarks.items()))
     start = np.array([1.0, 0.0, 0.0])
-    env = confine_ros(85)
+    env = confine_ros(89)
     localizer = start_localizer(work, args.filter, start, landmarks_file, env)
     rclpy.init()
     watcher = PoseWatcher()

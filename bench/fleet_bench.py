@@ -136,7 +136,7 @@ def main() -> None:
     parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 4, 8, 16])
     parser.add_argument("--late-ms", type=float, default=250.0)
     args = parser.parse_args()
-    env = confine_ros(79)
+    env = confine_ros(84)
     print(f"fleet: localization scenario ({STEPS} steps at 4 Hz) per robot, "
           f"ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}; late = belief more than {args.late_ms:g} ms "
           f"after its reading")

@@ -239,7 +239,7 @@ def main() -> None:
     if args.client:
         client_process(args.client[0], reads=args.client[1] == "reads")
         return
-    env = confine_ros(77)
+    env = confine_ros(82)
     env["PYTHONUNBUFFERED"] = "1"
     print(f"estimation_demo with and without a Foxglove live view (ROS_DOMAIN_ID "
           f"{env['ROS_DOMAIN_ID']}, {os.cpu_count()} cores)")

@@ -40,7 +40,7 @@ def main() -> None:
     parser.add_argument("--cells", type=int, default=1_000_000)
     parser.add_argument("--steps", type=int, default=30)
     args = parser.parse_args()
-    env = confine_ros(78)
+    env = confine_ros(83)
 
     import rclpy
 

@@ -60,7 +60,7 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
 
     start = carmen.read_log(log_path).scans[0].pose
     _, map_yaml = prepare(log_path, work)
-    env = confine_ros(86)
+    env = confine_ros(90)
     grid = ["-p", f"map_file:={map_yaml}", "-p", "resolution:=0.1", "-p", "heading_bins:=72",
             "-p", f"laser_max_range:={RANGE_MAX}"]
     # --every-scan: no motion threshold, every scan is an update (the default waits for

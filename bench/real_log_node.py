@@ -129,7 +129,7 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
     recording, map_yaml = prepare(log_path, work)
     period = float(np.median(np.diff([scan.t for scan in log.scans])))
     rate = period * args.scan_rate
-    env = confine_ros(83)
+    env = confine_ros(87)
     localizer = subprocess.Popen(
         [executable("grid_localizer"), "--ros-args", "-p", f"map_file:={map_yaml}",
          "-p", f"resolution:={args.resolution}", "-p", f"heading_bins:={args.heading_bins}",

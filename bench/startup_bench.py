@@ -93,7 +93,7 @@ def main() -> None:
         for setting in ("default", "profile"):
             env = dict(os.environ)
             env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-            env.setdefault("ROS_DOMAIN_ID", "79")
+            env.setdefault("ROS_DOMAIN_ID", "85")   # outside the tests' 1..80 (ros_env.py)
             env.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
             if setting == "profile":
                 env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(PROFILE)
