@@ -14,7 +14,8 @@ core's, and the largest difference from the core filter run offline on the same
 events, their observations read as the node reads them (float32 coordinates).
 
 ``latency``: a publisher in this process sends odometry at 100 Hz and camera frames
-at 30 Hz (a simulated unicycle among the UTIAS landmarks) to ekf_localizer; each
+at 30 Hz (a simulated unicycle among the UTIAS landmarks) to ekf_localizer with the
+package's default models (those of the simulation); each
 published pose is paired by its stamp with the event that made it, and the time from
 the event's publication to the pose's arrival here is measured (DDS both ways
 included).
@@ -92,10 +93,13 @@ class PoseWatcher:
                          if k.startswith(("handled.", "rejected.", "observations."))) or "-"
 
 
-def start_localizer(work: Path, kind: str, initial: np.ndarray,
-                    landmarks_file: Path, env: dict) -> subprocess.Popen:
+def start_localizer(work: Path, kind: str, initial: np.ndarray, landmarks_file: Path,
+                    env: dict, params: Path | None = PARAMS) -> subprocess.Popen:
+    """ekf_localizer as its own process, with the robots' file unless ``params`` is None
+    (the package's defaults)."""
+    from_file = ["--params-file", str(params)] if params is not None else []
     localizer = subprocess.Popen(
-        [executable("ekf_localizer"), "--ros-args", "--params-file", str(PARAMS),
+        [executable("ekf_localizer"), "--ros-args", *from_file,
          "-p", f"landmarks_file:={landmarks_file}", "-p", f"filter:={kind}",
          "-p", "initial_pose:=[" + ", ".join(repr(float(v)) for v in initial) + "]"],
         env=env, stdout=(work / "localizer.log").open("w"), stderr=subprocess.STDOUT)
@@ -209,7 +213,8 @@ def run_latency(args: argparse.Namespace, work: Path) -> None:
         f"  - {{id: {key}, x: {x!r}, y: {y!r}}}\n" for key, (x, y) in run.landmarks.items()))
     start = np.array([1.0, 0.0, 0.0])
     env = confine_ros(89)
-    localizer = start_localizer(work, args.filter, start, landmarks_file, env)
+    # the simulated frames are euclidean ranges of commands driven at once: the defaults
+    localizer = start_localizer(work, args.filter, start, landmarks_file, env, params=None)
     rclpy.init()
     watcher = PoseWatcher()
     odom_pub = watcher.node.create_publisher(Odometry, "odom", 100)

@@ -153,6 +153,8 @@ def main() -> None:
     args = parser.parse_args()
     if not args.dataset.is_dir():
         sys.exit(f"ekf_real: no dataset at {args.dataset} (see ../shared/data/README.md)")
+    if args.cross_validate and len(set(args.robots)) < 2:
+        sys.exit("ekf_real: --cross-validate needs two robots or more")
     runs = {robot: read_run(args.dataset, robot) for robot in args.robots}
     rows = []
     for robot, run in runs.items():

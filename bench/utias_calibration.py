@@ -85,21 +85,27 @@ def camera_figures(runs: Sequence[UtiasRun]) -> dict[str, float]:
     for kind in ("distance", "depth"):
         true = seen[kind][keep]
         scale = float(true @ seen["range"][keep] / (true @ true))
-        residual_std[kind] = float(np.std(seen["range"][keep] - scale * true))
+        # root mean square, not std: a bias is an error the filter cannot model either
+        residual_std[kind] = _rms(seen["range"][keep] - scale * true)
         figures[f"{kind}_scale"] = scale
         figures[f"{kind}_residual_std"] = residual_std[kind]
     kind = min(residual_std, key=residual_std.get)
     figures["range_model"] = "depth" if kind == "depth" else "euclidean"
     figures["range_scale"] = figures[f"{kind}_scale"]
-    true = seen[kind][keep]
-    residual = np.abs(seen["range"][keep] - figures["range_scale"] * true)
-    # E|e| = sqrt(2/pi) std for a Gaussian e: fit std = a + b range on |e|
-    coefficients, _ = nnls(np.column_stack([np.ones_like(true), true]),
+    measured = seen["range"][keep]
+    residual = np.abs(measured - figures["range_scale"] * seen[kind][keep])
+    # E|e| = sqrt(2/pi) std for a Gaussian e: fit std = a + b range on |e|, the range as
+    # measured (LandmarkModel.R takes the measured one)
+    coefficients, _ = nnls(np.column_stack([np.ones_like(measured), measured]),
                            residual / math.sqrt(2 / math.pi))
     figures["range_std"] = max(float(coefficients[0]), MIN_RANGE_STD)
     figures["range_std_per_m"] = float(coefficients[1])
-    figures["bearing_std"] = float(np.std(bearing_error[keep]))
+    figures["bearing_std"] = _rms(bearing_error[keep])
     return figures
+
+
+def _rms(values: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(values ** 2)))
 
 
 def _commanded(run: UtiasRun, starts: np.ndarray, delay: float) -> np.ndarray:
@@ -124,11 +130,16 @@ def _windows(run: UtiasRun) -> np.ndarray:
 
 
 def _true_motion(run: UtiasRun, starts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The distance forward (along the mean heading) and the turn of each window."""
+    """The distance driven forward and the turn of each window: Vicon's steps, each along
+    the heading of its moment, summed (a window's chord would be short on a curve)."""
+    truth = run.truth
+    heading = np.unwrap(truth[:, 3])
+    along = 0.5 * (heading[1:] + heading[:-1])
+    steps = np.diff(truth[:, 1]) * np.cos(along) + np.diff(truth[:, 2]) * np.sin(along)
+    driven = np.concatenate([[0.0], np.cumsum(steps)])
+    forward = np.interp(starts + WINDOW_S, truth[:, 0], driven) \
+        - np.interp(starts, truth[:, 0], driven)
     begin, end = _truth_at(run, starts), _truth_at(run, starts + WINDOW_S)
-    heading = 0.5 * (begin[:, 2] + end[:, 2])
-    forward = (end[:, 0] - begin[:, 0]) * np.cos(heading) \
-        + (end[:, 1] - begin[:, 1]) * np.sin(heading)
     return forward, end[:, 2] - begin[:, 2]
 
 
@@ -194,12 +205,14 @@ def main() -> None:
         sys.exit(f"utias_calibration: no dataset at {args.dataset} "
                  f"(see ../shared/data/README.md)")
     runs = [read_run(args.dataset, robot) for robot in args.robots]
+    if not runs:
+        sys.exit("utias_calibration: give at least one robot")
     camera, odometry = camera_figures(runs), odometry_figures(runs)
     print(f"robots {args.robots} of {args.dataset.name}")
     print(f"camera: {camera['observations']:.0f} landmark observations, "
           f"{camera['outliers']:.0f} left out (bearing > {OUTLIER_BEARING} rad off)")
     for kind in ("distance", "depth"):
-        print(f"  range = {camera[f'{kind}_scale']:.4f} x true {kind}: residual std "
+        print(f"  range = {camera[f'{kind}_scale']:.4f} x true {kind}: residual rms "
               f"{camera[f'{kind}_residual_std']:.4f} m")
     print(f"  range std = {camera['range_std']:.4f} + {camera['range_std_per_m']:.4f} "
           f"x range; bearing std {camera['bearing_std']:.4f} rad")

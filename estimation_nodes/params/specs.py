@@ -376,9 +376,10 @@ LANDMARK_MODEL_SPECS = (
               "calibration; 1 for a calibrated sensor).", min_value=0.5, max_value=2.0),
     ParamSpec("odometry_delay", 0.0, "Seconds between an odometry message's stamp and the "
               "robot driving its twist (0 for measured speeds; a robot that reports its "
-              "commands follows them late).", min_value=0.0, max_value=10.0),
+              "commands follows them late).", read_only=True, min_value=0.0, max_value=10.0),
     ParamSpec("odometry_scale", [1.0, 1.0], "[forward, turn]: the speeds the robot drives "
-              "per unit of the speeds its odometry reports (1 for measured speeds).",
+              "per unit of the speeds its odometry reports (1 for measured speeds; each in "
+              "(0, 10]).",
               type_name="double_array"),
     ParamSpec("sensor_pose", [0.0, 0.0, 0.0], "[x, y, yaw] of the camera on the robot (m, m, "
               "rad from the robot's heading)."),

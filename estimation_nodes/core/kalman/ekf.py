@@ -29,8 +29,9 @@ from estimation_nodes.core.kalman.unicycle import UnicycleNoise, wrap
 from estimation_nodes.core.validation import FloatArray
 
 IDENTITY = np.eye(3)
-#: The iterated EKF stops when no state component moves more than this (m or rad).
-ITERATION_STEP = 1e-9
+#: The iterated EKF stops when no state component moves more than this (m or rad): a
+#: micrometre, a microradian, far below what a sensor resolves.
+ITERATION_STEP = 1e-6
 
 
 class Innovation(NamedTuple):
@@ -121,11 +122,13 @@ def correct(x: FloatArray, P: FloatArray, observed: Innovation,
 
 def correct_iterated(x: FloatArray, P: FloatArray, observed: Innovation, z: FloatArray,
                      landmark: tuple[float, float], sensor: SensorPose, R: FloatArray,
-                     ranging: Ranging, iterations: int) -> tuple[FloatArray, FloatArray]:
+                     ranging: Ranging, iterations: int) -> tuple[FloatArray, FloatArray, bool]:
     """The observation applied by the iterated EKF, at most ``iterations`` passes (the
-    first is ``observed``, linearized at x); the Joseph form at the last linearization."""
+    first is ``observed``, linearized at x); the Joseph form at the last linearization.
+    The third value: whether the last pass moved less than ITERATION_STEP (always True
+    for one pass, the EKF)."""
     x_next, _ = correct(x, P, observed, R)
-    last = observed
+    last, converged = observed, iterations == 1
     for _ in range(iterations - 1):
         at = x_next
         H = range_bearing.jacobian(at, landmark, sensor, ranging)
@@ -140,5 +143,6 @@ def correct_iterated(x: FloatArray, P: FloatArray, observed: Innovation, z: Floa
         step = x_next - at
         step[2] = wrap(step[2])
         if np.abs(step).max() <= ITERATION_STEP:
+            converged = True
             break
-    return correct(x, P, last, R)
+    return (*correct(x, P, last, R), converged)

@@ -107,8 +107,8 @@ class LandmarkModel:
             raise ValueError(f"odometry_delay: expected 0 <= seconds <= 10, got "
                              f"{self.odometry_delay!r}")
         if len(self.odometry_scale) != 2 or not all(
-                math.isfinite(v) and v > 0 for v in self.odometry_scale):
-            raise ValueError(f"odometry_scale: expected [forward, turn] > 0, got "
+                math.isfinite(v) and 0 < v <= 10 for v in self.odometry_scale):
+            raise ValueError(f"odometry_scale: expected [forward, turn] in (0, 10], got "
                              f"{list(self.odometry_scale)}")
         for key, (lx, ly) in self.landmarks.items():
             if not (math.isfinite(lx) and math.isfinite(ly)):
@@ -136,8 +136,8 @@ class Observation:
 @dataclass
 class Outcome:
     """What became of one observation: 'used', 'gated', 'unknown', 'invalid' (not finite,
-    or no bearing), or 'unstable' (its correction would have left no valid covariance);
-    its NIS where it was computed."""
+    or no bearing), or 'unstable' (its correction failed or would have left no valid
+    covariance); its NIS where it was computed."""
 
     observation: Observation
     verdict: str
@@ -303,13 +303,20 @@ class LandmarkLocalization:
         """The correction applied where it leaves a finite estimate with a positive definite
         covariance (the UKF's P - K S K' need not, after a large innovation)."""
         model = self.model
-        if model.kind == "ekf" and model.iterations > 1:
-            x, P = ekf.correct_iterated(self.x, self.P, observed, z, landmark, model.sensor,
-                                        model.R(float(z[0])), model.ranging, model.iterations)
-        elif model.kind == "ekf":
-            x, P = ekf.correct(self.x, self.P, observed, model.R(float(z[0])))
-        else:
-            x, P = ukf.correct(self.x, self.P, observed)
+        try:
+            if model.kind == "ekf" and model.iterations > 1:
+                x, P, converged = ekf.correct_iterated(
+                    self.x, self.P, observed, z, landmark, model.sensor, model.R(float(z[0])),
+                    model.ranging, model.iterations)
+                if not converged:
+                    self.counts["iterations_unconverged"] += 1
+            elif model.kind == "ekf":
+                x, P = ekf.correct(self.x, self.P, observed, model.R(float(z[0])))
+            else:
+                x, P = ukf.correct(self.x, self.P, observed)
+        except (ValueError, np.linalg.LinAlgError):
+            # an iterate on the landmark itself (no bearing), or a singular S
+            return False
         if not (np.isfinite(x).all() and np.isfinite(P).all()):
             return False
         try:

@@ -110,7 +110,7 @@ def predict(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
         if kernels.unscented_predict(x, P, v * dt, w * dt, points.scale, points.Wm,
                                      points.Wc, var_d, var_phi, x_next, P_next):
             return x_next, P_next
-    # numpy's path, which also names a P without a Cholesky factor (LinAlgError)
+    # numpy's path: the same steps, and LinAlgError for a P with no Cholesky factor
     return predict_numpy(x, P, v, w, dt, noise, points)
 
 

@@ -239,7 +239,11 @@ def run_grid_scenario(params: Path, args: argparse.Namespace, kind: str) -> int:
     if args.record:
         print(f"estimation_demo: recorded to {args.record}")
     if args.plot and code == 0:
-        print(f"estimation_demo: plot written to {render_run(args, kind)}")
+        try:
+            print(f"estimation_demo: plot written to {render_run(args, kind)}")
+        except ValueError as error:
+            print(f"estimation_demo: no plot: {error}", file=sys.stderr)
+            return 1
     return code
 
 
