@@ -294,3 +294,17 @@ def test_the_compiled_unscented_prediction_is_numpys():
     for compiled in (True, False):
         with pytest.raises(np.linalg.LinAlgError):
             ukf.predict(x, -np.eye(3), 0.1, 0.0, 0.1, NOISE, points, compiled)
+
+
+def test_a_new_model_brings_its_gate():
+    # An observation 3 sigma off in bearing, NIS about 9: inside a 0.999 gate (13.8), outside
+    # a 0.95 one (5.99). The gate follows the model the filter is given.
+    localization = LandmarkLocalization(model(gate_probability=0.999), [0.0, 0.0, 0.0],
+                                        np.eye(3) * 1e-6, 0.0)
+    r, b = range_bearing.expected(localization.x, (2.0, 1.0), SENSOR)
+    far = Observation(6, r, b + 3 * 0.02)
+    assert [o.verdict for o in localization.on_frame(0.0, [far])] == ["used"]
+    localization = LandmarkLocalization(model(gate_probability=0.999), [0.0, 0.0, 0.0],
+                                        np.eye(3) * 1e-6, 0.0)
+    localization.model = model(gate_probability=0.95)
+    assert [o.verdict for o in localization.on_frame(0.0, [far])] == ["gated"]

@@ -152,7 +152,6 @@ class LandmarkLocalization:
         """Start at pose ``x0`` with covariance ``P0``, at time ``t0``; with ``t0`` None the
         filter starts at its first event's time, whatever event that is."""
         self.model = model
-        self._gate = model.gate
         self.x = as_finite_array("initial_pose", x0, ndim=1)
         if self.x.size != 3:
             raise ValueError(f"initial_pose: expected [x, y, yaw], got {self.x.tolist()}")
@@ -164,6 +163,16 @@ class LandmarkLocalization:
         self.counts: Counter[str] = Counter()
         self._last_used = self.t
         self._gated_since_used = 0
+
+    @property
+    def model(self) -> LandmarkModel:
+        return self._model
+
+    @model.setter
+    def model(self, model: LandmarkModel) -> None:
+        """A new model (a node's parameters changed) is taken whole, its gate included."""
+        self._model = model
+        self._gate = model.gate
 
     # --- state, as causal_order.py saves and restores it ---------------------------------
 
