@@ -19,7 +19,7 @@ Every function returns new values and leaves its inputs alone.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, cast
 
 import numpy as np
 
@@ -113,11 +113,21 @@ def correct(x: FloatArray, P: FloatArray, observed: Innovation,
             R: FloatArray) -> tuple[FloatArray, FloatArray]:
     """The observation applied, with the Joseph form of the covariance update."""
     assert observed.H is not None, "an EKF correction needs the EKF's innovation"
-    K = np.linalg.solve(observed.S, observed.Pxz.T).T
-    x_next = x + K @ observed.y
-    x_next[2] = wrap(x_next[2])
+    K = gain(observed)
     I_KH = IDENTITY - K @ observed.H
-    return x_next, _symmetric(I_KH @ P @ I_KH.T + K @ R @ K.T)
+    return shifted(x, K, observed.y), _symmetric(I_KH @ P @ I_KH.T + K @ R @ K.T)
+
+
+def gain(observed: Innovation) -> FloatArray:
+    """K = Pxz S^-1."""
+    return cast(FloatArray, np.linalg.solve(observed.S, observed.Pxz.T).T)
+
+
+def shifted(x: FloatArray, K: FloatArray, y: FloatArray) -> FloatArray:
+    """x + K y, the heading wrapped (the EKF's and the UKF's corrections)."""
+    x_next = x + K @ y
+    x_next[2] = wrap(x_next[2])
+    return x_next
 
 
 def correct_iterated(x: FloatArray, P: FloatArray, observed: Innovation, z: FloatArray,
@@ -126,20 +136,18 @@ def correct_iterated(x: FloatArray, P: FloatArray, observed: Innovation, z: Floa
     """The observation applied by the iterated EKF, at most ``iterations`` passes (the
     first is ``observed``, linearized at x); the Joseph form at the last linearization.
     The third value: whether the last pass moved less than ITERATION_STEP (always True
-    for one pass, the EKF)."""
-    x_next, _ = correct(x, P, observed, R)
+    for one pass, the EKF). Only the mean is updated between passes."""
+    x_next = shifted(x, gain(observed), observed.y)
     last, converged = observed, iterations == 1
     for _ in range(iterations - 1):
         at = x_next
-        H = range_bearing.jacobian(at, landmark, sensor, ranging)
-        PHt = P @ H.T
-        S = _symmetric(H @ PHt + R)
+        here = innovation(at, P, z, landmark, sensor, R, ranging)
+        assert here.H is not None
+        # linearized at ``at``, applied from x: y = z - h(at) - H (x - at)
         offset = x - at
         offset[2] = wrap(offset[2])
-        y = range_bearing.residual(z, range_bearing.expected(at, landmark, sensor, ranging)) \
-            - H @ offset
-        last = Innovation(y, S, PHt, H)
-        x_next, _ = correct(x, P, last, R)
+        last = here._replace(y=here.y - here.H @ offset)
+        x_next = shifted(x, gain(last), last.y)
         step = x_next - at
         step[2] = wrap(step[2])
         if np.abs(step).max() <= ITERATION_STEP:

@@ -20,9 +20,9 @@ import numpy as np
 
 from estimation_nodes.core.compiled_loader import load_kernels
 from estimation_nodes.core.kalman import range_bearing, unicycle
-from estimation_nodes.core.kalman.ekf import Innovation, _symmetric
+from estimation_nodes.core.kalman.ekf import Innovation, _symmetric, gain, shifted
 from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, SensorPose
-from estimation_nodes.core.kalman.unicycle import TWO_PI, UnicycleNoise, wrap
+from estimation_nodes.core.kalman.unicycle import TWO_PI, UnicycleNoise
 from estimation_nodes.core.validation import FloatArray
 
 STATE_SIZE = 3
@@ -141,7 +141,5 @@ def innovation(x: FloatArray, P: FloatArray, z: FloatArray, landmark: tuple[floa
 
 def correct(x: FloatArray, P: FloatArray, observed: Innovation) -> tuple[FloatArray, FloatArray]:
     """The observation applied: x + K y and P - K S K'."""
-    K = np.linalg.solve(observed.S, observed.Pxz.T).T
-    x_next = x + K @ observed.y
-    x_next[2] = wrap(x_next[2])
-    return x_next, _symmetric(P - K @ observed.S @ K.T)
+    K = gain(observed)
+    return shifted(x, K, observed.y), _symmetric(P - K @ observed.S @ K.T)
