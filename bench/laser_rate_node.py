@@ -19,7 +19,6 @@ the published poses against the simulator's true poses (paired by stamp).
 from __future__ import annotations
 
 import argparse
-import math
 import subprocess
 import sys
 import tempfile
@@ -31,12 +30,13 @@ import numpy as np
 BENCH = Path(__file__).resolve().parent
 sys.path.insert(0, str(BENCH))
 sys.path.insert(1, str(BENCH.parent))
-from real_buildings import LOGS, NEAR_M, NEAR_RAD, RANGE_MAX  # noqa: E402
+from real_buildings import LOGS, RANGE_MAX  # noqa: E402
 from real_log_node import (  # noqa: E402
     Watcher,
     end_run,
     executable,
     peak_mib,
+    pose_rows,
     prepare,
     wait_for_line,
 )
@@ -113,10 +113,6 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
 
 def summary(args, watcher: Watcher, truths: dict, driven_s: float, peak: float,
             busy: list[float]) -> list[list[str]]:
-    paired = [(pose, truths[stamp]) for stamp, pose in watcher.poses.items()
-              if stamp in truths]
-    errors = np.array([math.hypot(p[0] - t[0], p[1] - t[1]) for p, t in paired])
-    turns = np.array([abs(math.remainder(p[2] - t[2], 2 * math.pi)) for p, t in paired])
     d = watcher.diagnostics
     updates = int(d.get("handled.scan", 0))
     sent = int(round(args.seconds * args.rate_hz))
@@ -133,11 +129,7 @@ def summary(args, watcher: Watcher, truths: dict, driven_s: float, peak: float,
          f"{d.get('update_ms_max', '?')} ms"],
         ["localizer peak RSS (VmHWM)", f"{peak:.0f} MiB"],
         ["wall time of the drive", f"{driven_s:.1f} s"],
-        ["poses paired with a true pose", str(len(paired))],
-        ["within 0.2 m and 5 deg", f"{100 * np.mean((errors <= NEAR_M) & (turns <= NEAR_RAD)):.1f}"
-         " %" if paired else "-"],
-        ["median error", f"{100 * np.median(errors):.1f} cm, "
-         f"{math.degrees(np.median(turns)):.1f} deg" if paired else "-"],
+        *pose_rows(watcher.poses, truths, "true pose"),
     ]
 
 

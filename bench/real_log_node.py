@@ -224,11 +224,23 @@ def wait_for_line(process: subprocess.Popen, output: Path, text: str,
     return False
 
 
-def summary(log, watcher: Watcher, rate: float, played_s: float, peak: float) -> list[list[str]]:
-    truth = {int(round(scan.t * 1e9)): scan.pose for scan in log.scans}
-    paired = [(pose, truth[stamp]) for stamp, pose in watcher.poses.items() if stamp in truth]
+def pose_rows(poses: dict, truths: dict, truth_name: str) -> list[list[str]]:
+    """The published poses against the truth of the same stamp: how many were paired, the
+    share within 0.2 m and 5 degrees, the median errors."""
+    paired = [(pose, truths[stamp]) for stamp, pose in poses.items() if stamp in truths]
     errors = np.array([math.hypot(p[0] - t[0], p[1] - t[1]) for p, t in paired])
     turns = np.array([abs(math.remainder(p[2] - t[2], 2 * math.pi)) for p, t in paired])
+    return [
+        [f"poses paired with a {truth_name}", str(len(paired))],
+        ["within 0.2 m and 5 deg", f"{100 * np.mean((errors <= NEAR_M) & (turns <= NEAR_RAD)):.1f}"
+         " %" if paired else "-"],
+        ["median error", f"{100 * np.median(errors):.1f} cm, "
+         f"{math.degrees(np.median(turns)):.1f} deg" if paired else "-"],
+    ]
+
+
+def summary(log, watcher: Watcher, rate: float, played_s: float, peak: float) -> list[list[str]]:
+    truth = {int(round(scan.t * 1e9)): scan.pose for scan in log.scans}
     d = watcher.diagnostics
     handled = int(d.get("handled.scan", 0))
     not_due = int(d.get("handled.scan_without_motion", 0))
@@ -243,11 +255,7 @@ def summary(log, watcher: Watcher, rate: float, played_s: float, peak: float) ->
         ["update, median / max (node's own)", f"{d.get('update_ms_median', '?')} / "
          f"{d.get('update_ms_max', '?')} ms"],
         ["localizer peak RSS (VmHWM)", f"{peak:.0f} MiB"],
-        ["poses paired with a corrected pose", str(len(paired))],
-        ["within 0.2 m and 5 deg", f"{100 * np.mean((errors <= NEAR_M) & (turns <= NEAR_RAD)):.1f}"
-         " %" if paired else "-"],
-        ["median error", f"{100 * np.median(errors):.1f} cm, "
-         f"{math.degrees(np.median(turns)):.1f} deg" if paired else "-"],
+        *pose_rows(watcher.poses, truth, "corrected pose"),
     ]
 
 
