@@ -8,7 +8,10 @@ No command is lost at start-up: the first one goes out only once
 discover itself. Later, while they are not all matched (a node restarting),
 the commander pauses and resumes ``start_delay`` after they are back. A node
 that crashes is noticed only when DDS drops it (its lease, 20 s by default), so
-commands sent before then are lost to it.
+commands sent before then are lost to it; one that stops cleanly is noticed
+when its goodbye reaches the commander's graph, and a command sent in between
+(one in three restarts under load, measured by tests/graph/test_faults.py) is
+lost to it too.
 """
 
 from __future__ import annotations
