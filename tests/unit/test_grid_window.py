@@ -107,9 +107,10 @@ def test_the_grown_box_holds_everything_the_prediction_reaches():
         assert not outside.any()
 
 
-def test_the_kidnap_lattice_correction_is_bayes_rule_over_the_mixed_prior():
+@pytest.mark.parametrize("phase", [0, 1])
+def test_the_kidnap_lattice_correction_is_bayes_rule_over_the_mixed_prior(phase):
     """Floor 0 keeps every lattice state: the posterior equals the dense correction of
-    (1 - share) belief + share spread over the lattice's free states."""
+    (1 - share) belief + share spread over the free states of the lattice's part."""
     model = room(30, 34)
     belief = np.zeros(model.shape)
     belief[:, 10:14, 12:15] = RNG.random((16, 4, 3)) * model.free[10:14, 12:15]
@@ -118,9 +119,10 @@ def test_the_kidnap_lattice_correction_is_bayes_rule_over_the_mixed_prior():
     ranges, angles = scan()
     share, weight = 0.01, 0.7
     correction = window.correct_boxes([window.window_of(belief, box)], [box], model, ranges,
-                                      angles, weight, share, floor=0.0)
+                                      angles, weight, share, floor=0.0, phase=phase)
     lattice = np.zeros(model.shape)
-    lattice[::2, ::2, ::2] = model.free[::2, ::2]
+    rows, columns = np.indices((15, 17))
+    lattice[::2, ::2, ::2] = model.free[::2, ::2] & ((rows + columns) % 2 == phase)
     prior = (1 - share) * belief + share * lattice / lattice.sum()
     expected, expected_evidence = grid.correct(
         prior, weight * grid.scan_log_likelihood(model, ranges, angles))
@@ -131,7 +133,16 @@ def test_the_kidnap_lattice_correction_is_bayes_rule_over_the_mixed_prior():
     full[ks, rs, cs] = kept
     np.testing.assert_allclose(full, expected, rtol=0, atol=1e-14)
     assert correction.log_evidence == pytest.approx(expected_evidence, abs=1e-12)
-    assert correction.left_out == 0.0
+    assert correction.left_out == pytest.approx(0.0, abs=1e-15)   # the sums' rounding
+
+
+def test_the_lattice_s_parts_take_each_free_lattice_cell_once():
+    model = room(31, 34)
+    parts = [window.lattice_cells(model, phase) for phase in range(window.KIDNAP_PHASES)]
+    np.testing.assert_array_equal(sum(part.astype(int) for part in parts),
+                                  model.free[::2, ::2].astype(int))
+    np.testing.assert_array_equal(window.lattice_cells(model, window.KIDNAP_PHASES + 1),
+                                  parts[1])
 
 
 def test_a_kidnapped_robot_is_found_on_the_lattice():

@@ -22,8 +22,9 @@ With ``belief_floor`` > 0 the states of less probability are dropped after each
 correction (their total is ``last_dropped``), and the steps run over the boxes of
 the states left, grown by what a prediction can reach (grid/window.py): a tracked
 robot's update then costs what its few square metres cost, not the building. The
-kidnap share then goes on a coarse lattice of one state in eight
-(``window.correct_boxes``), scored with every scan. 0 keeps the dense filter.
+kidnap share then goes on a coarse lattice of one state in eight, half of it at
+each update in turn (``window.correct_boxes``, ``window.lattice_cells``), scored
+with the scan. 0 keeps the dense filter.
 
 Each method checks what it is given (a pose of three finite numbers, a scan of
 readings as ``steps.check_scan`` says, a stamp that is an integer) and raises
@@ -252,12 +253,14 @@ class GridLocalization:
         if delta is None:
             priors = [self._window(box)[1] for box in boxes]
         else:
-            spreads = [grid._spread(*self._window(box)[::-1], delta, self.noise)
-                       for box in boxes]
+            # Each window with the kernels of the whole grid's size: numpy's on a small
+            # window cost more than the compiled ones (a pass per heading).
+            spreads = [grid._spread(*self._window(box)[::-1], delta, self.noise,
+                                    grid_states=grid._states(self.model)) for box in boxes]
             total = sum(left for _, left in spreads)
             priors = [grid._normalized(spread, total) for spread, _ in spreads]
         return window.correct_boxes(priors, boxes, self.model, ranges, angles, weight,
-                                    self._kidnap, self._floor)
+                                    self._kidnap, self._floor, phase=self.updates)
 
     @property
     def window_states(self) -> int:

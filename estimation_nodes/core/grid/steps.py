@@ -392,6 +392,10 @@ def compiled_kernels(states: int, allowed: bool = True) -> ModuleType | None:
     return _compiled_kernels() if allowed and states >= COMPILED_MIN_STATES else None
 
 
+def _states(model: GridModel) -> int:
+    return model.free.size * model.heading_bins
+
+
 def motion_noise(delta: tuple[float, float, float], noise: OdometryNoise,
                  model: GridModel) -> tuple[float, float]:
     """The spread of a motion: std in cells (x and y) and in heading bins."""
@@ -462,10 +466,13 @@ def _predict(belief: FloatArray, model: GridModel, delta: tuple[float, float, fl
 
 
 def _spread(belief: FloatArray, model: GridModel, delta: tuple[float, float, float],
-            noise: OdometryNoise, compiled: bool = True) -> tuple[FloatArray, float]:
+            noise: OdometryNoise, compiled: bool = True,
+            grid_states: int | None = None) -> tuple[FloatArray, float]:
     """The prediction before it is normalized, and its sum (the probability left on free
-    cells): a belief held in several windows (grid/window.py) is normalized over all."""
-    kernels = compiled_kernels(belief.size, compiled)
+    cells): a belief held in several windows (grid/window.py) is normalized over all.
+    ``grid_states``: the states of the grid a window is cut from, which choose the
+    compiled kernels or numpy's (``compiled_kernels``) as for the whole grid."""
+    kernels = compiled_kernels(grid_states or belief.size, compiled)
     if kernels is not None:
         return _spread_compiled(kernels, belief, model, delta, noise)
     rot1, trans, rot2 = delta
@@ -558,10 +565,13 @@ def scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray
 
 def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
                          compiled: bool = True,
-                         box: tuple[int, int, int, int] | None = None) -> FloatArray:
+                         box: tuple[int, int, int, int] | None = None,
+                         whole_grid_kernels: bool = False) -> FloatArray:
     """The scan's log likelihood over every state, or over the states of the window
     ``box`` (first row, row past the last, first column, column past the last; see
-    grid/window.py): (K, rows, columns) of the box."""
+    grid/window.py): (K, rows, columns) of the box. ``whole_grid_kernels``: the compiled
+    kernels or numpy's chosen by the grid's states, not the box's (numpy's costs a pass
+    per heading and beam, whatever the box's size)."""
     if ranges.size * model.log_bound > LOG_SUM_LIMIT:
         raise InvalidInputError(f"ranges: {ranges.size} beams over log likelihoods as large "
                                 f"as {model.log_bound:g} would overflow their sum")
@@ -574,7 +584,8 @@ def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArra
     pad_rows, pad_cols = pad_rows + r0, pad_cols + c0
     rows, cols = r1 - r0, c1 - c0
     shape = (model.heading_bins, rows, cols)
-    kernels = compiled_kernels(int(np.prod(shape)), compiled)
+    kernels = compiled_kernels(_states(model) if whole_grid_kernels else int(np.prod(shape)),
+                               compiled)
     if kernels is not None:
         out = np.empty(shape)      # the kernel writes every element
         kernels.scan_log_likelihood(padded, pad_rows, pad_cols, offsets, model.heading_bins,
@@ -589,15 +600,17 @@ def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArra
 
 
 def _scan_log_likelihood_strided(model: GridModel, ranges: FloatArray, angles: FloatArray,
-                                 step: int, compiled: bool = True) -> FloatArray:
+                                 step: int, compiled: bool = True,
+                                 cells: np.ndarray | None = None) -> FloatArray:
     """The scan's log likelihood at every ``step``-th heading, row and column: the
     states (step k, step i, step j) of ``_scan_log_likelihood``, in its order of sums;
-    0 at the lattice's cells that are not free (only free states are scored)."""
+    0 at the lattice's cells that are not free, or not in ``cells`` (a mask over the
+    lattice's cells, at most its free ones) where given: only those are scored."""
     offsets = np.ascontiguousarray(_beam_endpoints(model, ranges, angles)[::step])
     padded, pad_rows, pad_cols = _padded_field(model, offsets)
-    lattice_free = model.free[::step, ::step]
+    lattice_free = model.free[::step, ::step] if cells is None else cells
     shape = (offsets.shape[0], *lattice_free.shape)
-    kernels = compiled_kernels(int(np.prod(shape)), compiled)
+    kernels = compiled_kernels(_states(model), compiled)   # as the grid's other steps
     if kernels is not None:
         out = np.empty(shape)
         rows, columns = np.nonzero(lattice_free)

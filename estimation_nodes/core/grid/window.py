@@ -173,31 +173,53 @@ def zero_below(belief: FloatArray, threshold: float) -> float:
     return dropped
 
 
-#: The kidnap share goes on one state in KIDNAP_STEP^3: every other heading, row and column.
+#: The kidnap lattice: every KIDNAP_STEP-th heading, row and column...
 KIDNAP_STEP = 2
+#: ...of which each update takes one of KIDNAP_PHASES interleaved parts, in turn: the
+#: lattice's cells (i, j) with (i + j) % KIDNAP_PHASES == the update's phase.
+KIDNAP_PHASES = 2
+
+
+def lattice_cells(model: grid.GridModel, phase: int) -> np.ndarray:
+    """The free cells of the kidnap lattice's part ``phase`` (mod KIDNAP_PHASES), as a
+    mask over the lattice's rows and columns (model.free[::KIDNAP_STEP, ::KIDNAP_STEP]).
+
+    Over KIDNAP_PHASES updates in a row the parts cover the lattice once: a kidnapped
+    robot is scored from a lattice cell within KIDNAP_STEP cells of it every update,
+    and from the nearest one every KIDNAP_PHASES updates, at 1 / KIDNAP_PHASES of the
+    cost of scoring the whole lattice with every scan (half of a tracked update's time
+    on a building the size of the Intel lab's, bench/real_buildings.py --profile).
+    """
+    free = model.free[::KIDNAP_STEP, ::KIDNAP_STEP]
+    rows = np.arange(free.shape[0])[:, None]
+    columns = np.arange(free.shape[1])[None, :]
+    return free & ((rows + columns) % KIDNAP_PHASES == phase % KIDNAP_PHASES)
 
 
 def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridModel,
                   ranges: FloatArray, angles: FloatArray, weight: float, share: float,
-                  floor: float, compiled: bool = True) -> Correction:
+                  floor: float, compiled: bool = True, phase: int = 0) -> Correction:
     """The correction of a belief held in disjoint ``boxes`` (``priors``: each box's part,
     zero elsewhere). With ``share`` > 0 the prior is (1 - share) x that belief plus
-    ``share`` spread evenly over the free states of a coarse lattice (every KIDNAP_STEP-th
-    heading, row and column, a fraction 1 / KIDNAP_STEP^3 of the states), so that a
-    kidnapped robot is found by its scans at the cost of scoring the lattice, not every
-    state. (The next prediction's blur spreads what the lattice finds.)
+    ``share`` spread evenly over the free states of a coarse lattice's part ``phase``
+    (every KIDNAP_STEP-th heading, row and column, then one cell in KIDNAP_PHASES of
+    those: ``lattice_cells``), so that a kidnapped robot is found by its scans at the
+    cost of scoring that part, not every state. (The next prediction's blur spreads
+    what the lattice finds.)
 
     The lattice's posterior within the boxes joins theirs; outside them its states of
     probability ``floor`` or more are kept (``Correction.kept``) and the rest, all below
     the floor, left out (``Correction.left_out``, the whole renormalized over the rest).
     """
     step = KIDNAP_STEP
-    lattice_free = model.free[::step, ::step]
+    lattice_free = lattice_cells(model, phase)
     free_states = int(lattice_free.sum()) * -(-model.heading_bins // step)
-    lls = [grid._scan_log_likelihood(model, ranges, angles, compiled, box) for box in boxes]
+    lls = [grid._scan_log_likelihood(model, ranges, angles, compiled, box, whole_grid_kernels=True)
+           for box in boxes]
     lattice_ll = None
     if share > 0.0 and free_states > 0:
-        lattice_ll = grid._scan_log_likelihood_strided(model, ranges, angles, step, compiled)
+        lattice_ll = grid._scan_log_likelihood_strided(model, ranges, angles, step, compiled,
+                                                       cells=lattice_free)
     for ll in [*lls, *([lattice_ll] if lattice_ll is not None else [])]:
         if weight != 1.0:
             np.multiply(ll, weight, out=ll)
