@@ -82,8 +82,10 @@ class MapRun:
 def run(case: MapRun, seed: int, seconds: float, kidnap: bool,
         independent_beams: int | None = None, belief_floor: float | None = None) -> dict:
     values = spec_defaults(GRID_LOCALIZER_SPECS)
+    # max_states as large as a real building needs (the node's default stops at 5 M).
     values.update(map_file=str(case.path), laser_max_range=case.laser_range,
-                  resolution=case.resolution, heading_bins=case.heading_bins)
+                  resolution=case.resolution, heading_bins=case.heading_bins,
+                  max_states=200_000_000)
     if belief_floor is not None:
         values.update(belief_floor=belief_floor)
     if independent_beams is not None:

@@ -123,6 +123,7 @@ def summary(args, watcher: Watcher, truths: dict, driven_s: float, peak: float,
         ["updates / not due (no motion)", f"{updates} / "
          f"{d.get('handled.scan_without_motion', 0)}"],
         ["scans answered per second", f"{updates / args.seconds:.1f}"],
+        ["scans not answered, in the first 5 s / after", unanswered(watcher.poses, truths)],
         ["busy (share of the time updating), median / max of its reports",
          f"{np.median(busy):.0f} / {max(busy):.0f} %" if busy else "-"],
         ["update, median / max (node's own)", f"{d.get('update_ms_median', '?')} / "
@@ -131,6 +132,18 @@ def summary(args, watcher: Watcher, truths: dict, driven_s: float, peak: float,
         ["wall time of the drive", f"{driven_s:.1f} s"],
         *pose_rows(watcher.poses, truths, "true pose"),
     ]
+
+
+def unanswered(poses: dict[int, tuple], truths: dict[int, tuple],
+               settling_s: float = 5.0) -> str:
+    """The simulator's scans (one true pose each, same stamp) with no published pose: in
+    the first ``settling_s`` (the given pose's spread narrowing) and after."""
+    if not truths:
+        return "-"
+    first = min(truths)
+    missed = [stamp for stamp in truths if stamp not in poses]
+    early = sum(stamp - first < settling_s * 1e9 for stamp in missed)
+    return f"{early} / {len(missed) - early}"
 
 
 def main() -> None:

@@ -60,17 +60,25 @@ def brute_force_predict(belief, model, delta, noise):
         for i in range(rows):
             for j in range(cols):
                 mass = belief[k, i, j]
-                for ti, wi in ((math.floor(i + sr), 1 - (sr - math.floor(sr))),
-                               (math.floor(i + sr) + 1, sr - math.floor(sr))):
-                    for tj, wj in ((math.floor(j + sc), 1 - (sc - math.floor(sc))),
-                                   (math.floor(j + sc) + 1, sc - math.floor(sc))):
+                # Whole cells and the fraction of the shift itself: floor(j + sc) for a
+                # shift of -3e-16 rounds j + sc up to j at j = 8 and sent the mass a cell on.
+                for ti, wi in ((i + math.floor(sr), 1 - (sr - math.floor(sr))),
+                               (i + math.floor(sr) + 1, sr - math.floor(sr))):
+                    for tj, wj in ((j + math.floor(sc), 1 - (sc - math.floor(sc))),
+                                   (j + math.floor(sc) + 1, sc - math.floor(sc))):
                         whole, part = math.floor(turn), turn - math.floor(turn)
                         for tk, wk in (((k + whole) % bins, 1 - part),
                                        ((k + whole + 1) % bins, part)):
                             if 0 <= ti < rows and 0 <= tj < cols:
                                 moved[tk, ti, tj] += mass * wi * wj * wk
-    sigma_m = noise.floor_m + noise.alpha3 * trans + noise.alpha4 * (abs(rot1) + abs(rot2))
-    sigma_rad = noise.floor_rad + noise.alpha1 * (abs(rot1) + abs(rot2)) + noise.alpha2 * trans
+    # AMCL's noise: a rotation counts as its distance to 0 or pi (backwards is as certain
+    # as forwards); a translation below 1 cm is jitter, the motion the turn alone.
+    if trans < 0.01:
+        turned = abs(math.remainder(rot1 + rot2, 2 * math.pi))
+    else:
+        turned = sum(min(abs(r), math.pi - abs(r)) for r in (rot1, rot2))
+    sigma_m = noise.floor_m + noise.alpha3 * trans + noise.alpha4 * turned
+    sigma_rad = noise.floor_rad + noise.alpha1 * turned + noise.alpha2 * trans
     taps_xy = grid.gaussian_taps(sigma_m / model.resolution)
     taps_k = grid.gaussian_taps(sigma_rad / model.bin_width)
     hxy, hk = taps_xy.size // 2, taps_k.size // 2
@@ -105,6 +113,8 @@ def test_scan_log_likelihood_equals_brute_force(beams):
     (0.3, 0.17, -0.1),                    # a fraction of a cell, turning
     (-2.0, 0.55, 1.1),                    # several cells, a large turn
     (math.pi / 2, 0.45, 0.0),             # out of the small map for many states
+    (3.0, 0.2, -3.1),                     # backwards
+    (1.5, 0.004, -1.4),                   # turning on the spot, odometry's jitter aside
 ])
 def test_prediction_equals_brute_force(delta):
     model = small_model()
@@ -112,6 +122,20 @@ def test_prediction_equals_brute_force(delta):
     belief = random_belief(model)
     np.testing.assert_allclose(grid.predict(belief, model, delta, noise),
                                brute_force_predict(belief, model, delta, noise),
+                               rtol=0, atol=1e-12)
+
+
+def test_backwards_is_as_certain_as_forwards_and_jitter_is_no_turn():
+    model = small_model()
+    noise = grid.OdometryNoise(alpha1=0.2, alpha2=0.2, alpha3=0.2, alpha4=0.2)
+    forward = grid.motion_noise((0.1, 0.3, -0.05), noise, model)
+    backward = grid.motion_noise((0.1 - math.pi, 0.3, math.pi - 0.05), noise, model)
+    np.testing.assert_allclose(backward, forward, rtol=0, atol=1e-12)
+    # 3 mm to the robot's back left while it turned 0.1 rad: rot1 2.4, rot2 -2.3.
+    jitter = grid.odometry_delta((1.0, 1.0, 0.0), (1.0 - 0.002, 1.0 + 0.002, 0.1))
+    assert abs(jitter[0]) > 2.0
+    on_the_spot = grid.motion_noise((0.0, jitter[1], 0.1), noise, model)
+    np.testing.assert_allclose(grid.motion_noise(jitter, noise, model)[1], on_the_spot[1],
                                rtol=0, atol=1e-12)
 
 

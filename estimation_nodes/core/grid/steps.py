@@ -407,14 +407,40 @@ def motion_noise(delta: tuple[float, float, float], noise: OdometryNoise,
     return sigma_cells, sigma_bins
 
 
+#: Below this translation (m) the direction of travel is odometry's jitter, not a turn:
+#: the motion's noise is that of a turn on the spot (nav2_amcl's 0.01 m).
+JITTER_M = 0.01
+
+
 def _motion_noise(delta: tuple[float, float, float], noise: OdometryNoise,
                   model: GridModel) -> tuple[float, float]:
     """``motion_noise``: inf when the motion is so extreme that it overflows (the blurs
-    take an infinite sigma as an even spread)."""
-    rot1, trans, rot2 = delta
-    sigma_m = noise.floor_m + noise.alpha3 * trans + noise.alpha4 * (abs(rot1) + abs(rot2))
-    sigma_rad = noise.floor_rad + noise.alpha1 * (abs(rot1) + abs(rot2)) + noise.alpha2 * trans
+    take an infinite sigma as an even spread).
+
+    The rotations' sizes are those of ``noise_rotations``: the motion itself is shifted
+    exactly as odometry says, only its noise is AMCL's."""
+    turned = noise_rotations(delta)
+    trans = delta[1]
+    sigma_m = noise.floor_m + noise.alpha3 * trans + noise.alpha4 * turned
+    sigma_rad = noise.floor_rad + noise.alpha1 * turned + noise.alpha2 * trans
     return sigma_m / model.resolution, sigma_rad / model.bin_width
+
+
+def noise_rotations(delta: tuple[float, float, float]) -> float:
+    """|rot1| + |rot2| as the motion noise takes them (nav2_amcl's differential model):
+
+    - driving backwards is rot1 near pi, then rot2 near -pi, and is as certain as driving
+      forwards: each rotation counts as its distance to 0 or to pi, the nearer;
+    - a translation below JITTER_M is jitter (a robot turning on the spot, its odometry
+      a few mm off to any side): the motion counts as the turn alone.
+
+    Taken at face value, either made a turn of 0.1 rad count as 2 pi, and the blur spread
+    a tracked belief by metres (seen on a steady laser: a wandering robot turning on the
+    spot, every scan an update)."""
+    rot1, trans, rot2 = delta
+    if trans < JITTER_M:
+        return abs(math.remainder(rot1 + rot2, TWO_PI))
+    return sum(min(abs(rotation), math.pi - abs(rotation)) for rotation in (rot1, rot2))
 
 
 def layer_shifts(model: GridModel, rot1: float, trans: float) -> tuple[FloatArray, FloatArray]:
