@@ -80,17 +80,18 @@ def building_map(log: carmen.CarmenLog):
 
 
 def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
-        belief_floor: float, profile: bool, global_start: bool = False) -> dict:
+        belief_floor: float, profile: bool, global_start: bool = False,
+        scan_fit: bool = True) -> dict:
     """The localizer on the log's first ``scans`` scans, from the first corrected pose
     (or, ``global_start``, from no pose: uniform over the free cells)."""
     log = carmen.read_log(log_path)
     occupancy = building_map(log)
     values = spec_defaults(GRID_LOCALIZER_SPECS)
     values.update(resolution=resolution, heading_bins=heading_bins, max_states=200_000_000,
-                  laser_max_range=RANGE_MAX, belief_floor=belief_floor)
+                  laser_max_range=RANGE_MAX, belief_floor=belief_floor, scan_fit=scan_fit)
     settings = build_grid_localizer_settings(values)
     model = grid_model(occupancy, resolution, heading_bins, settings.sensor,
-                       settings.max_states)
+                       settings.max_states, settings.scan_fit)
     localization = settings.localization(model)
     if not global_start:
         localization.set_prior(log.scans[0].pose,
@@ -211,6 +212,8 @@ def main() -> None:
     parser.add_argument("--stamps", help=argparse.SUPPRESS)   # the AMCL child's scans
     parser.add_argument("--global-start", action="store_true",
                         help="no initial pose: global localization from a uniform belief")
+    parser.add_argument("--no-scan-fit", action="store_true",
+                        help="scan_fit false: the pose is the belief's, not refined by the scan")
     args = parser.parse_args()
     if args.one:
         print(json.dumps(run_one(args)))
@@ -242,7 +245,7 @@ def run_one(args: argparse.Namespace) -> dict:
         stamps = json.loads(Path(args.stamps).read_text())
         return run_amcl(resolve(log), stamps, args.global_start)
     return run(resolve(log), args.scans, args.resolution, args.heading_bins, float(floor),
-               args.profile, args.global_start)
+               args.profile, args.global_start, not args.no_scan_fit)
 
 
 HEADER = ["log", "filter", "cells", "states", "free states", "updates",
@@ -254,7 +257,8 @@ def grid_child(args: argparse.Namespace, name: str, floor: float) -> dict:
     command = [sys.executable, __file__, "--one", f"{name},{floor!r}", "--scans",
                str(args.scans), "--resolution", str(args.resolution), "--heading-bins",
                str(args.heading_bins)] + (["--profile"] if args.profile else []) \
-        + (["--global-start"] if getattr(args, "global_start", False) else [])
+        + (["--global-start"] if getattr(args, "global_start", False) else []) \
+        + (["--no-scan-fit"] if getattr(args, "no_scan_fit", False) else [])
     done = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 

@@ -90,6 +90,8 @@ def main() -> None:
                         help="intel, aces or a CARMEN log's path (default: intel and aces)")
     parser.add_argument("--scans", type=int, default=10**6,
                         help="scans of each log played (default: all)")
+    parser.add_argument("--no-scan-fit", action="store_true",
+                        help="scan_fit false: the pose is the belief's, not refined by the scan")
     args = parser.parse_args()
     logs = args.log or ["intel", "aces"]
     missing = [name for name in logs if not resolve(name).exists()]
@@ -104,7 +106,8 @@ def main() -> None:
     for name in logs:
         for start in ("tracking", "global"):
             options = argparse.Namespace(scans=args.scans, resolution=0.1, heading_bins=72,
-                                         profile=False, global_start=start == "global")
+                                         profile=False, global_start=start == "global",
+                                         no_scan_fit=args.no_scan_fit)
             ours = grid_child(options, name, floor)
             rows.append(row(name, start, "grid_localizer", ours))
             if amcl_baseline.available():

@@ -57,10 +57,12 @@ class GridLocalizerSettings:
     frame_id: str
     history_depth: int
     diagnostics_period: float
+    #: Whether the published pose is refined by the scan's fit (grid/scan_fit.py).
+    scan_fit: bool = False
 
     def model_for(self, occupancy: OccupancyMap) -> GridModel:
         return grid_model(occupancy, self.resolution, self.heading_bins, self.sensor,
-                          self.max_states)
+                          self.max_states, self.scan_fit)
 
     def localization(self, model: GridModel) -> GridLocalization:
         """A new belief on ``model`` with this update rule, uniform over the free cells."""
@@ -77,7 +79,8 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
         raise ValueError("frame_id: expected a frame name, got an empty string")
     occupancy = read_map_file(Path(values["map_file"])) if values["map_file"] else None
     model = grid_model(occupancy, values["resolution"], values["heading_bins"], sensor,
-                       values["max_states"]) if occupancy is not None else None
+                       values["max_states"], values["scan_fit"]) if occupancy is not None \
+        else None
     return GridLocalizerSettings(
         sensor, odometry_noise(values), values["resolution"], values["heading_bins"],
         values["max_states"], occupancy, model, update_min_d=values["update_min_d"],
@@ -87,7 +90,8 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
         independent_beams=values["laser_independent_beams"],
         quality_radius=values["quality_radius"],
         quality_angle=math.radians(values["quality_angle"]), frame_id=values["frame_id"],
-        history_depth=values["history_depth"], diagnostics_period=values["diagnostics_period"])
+        history_depth=values["history_depth"], diagnostics_period=values["diagnostics_period"],
+        scan_fit=values["scan_fit"])
 
 
 @dataclass(frozen=True)

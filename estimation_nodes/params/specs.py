@@ -284,6 +284,11 @@ GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
               "the motion reaches: a tracked robot costs its few square metres, not the "
               "building. 0: the dense filter over every state.", read_only=True,
               min_value=0.0, max_value=1e-3),
+    ParamSpec("scan_fit", True, "Publish the pose where the last scan fits the map best "
+              "on the map's own resolution, within a state cell and a heading bin of the "
+              "belief's mean (a local scan match; the belief, its covariance and the quality "
+              "stay the filter's). false: the belief's mean around its most likely state.",
+              read_only=True),
     ParamSpec("max_odom_jump", 1.0, "An odometry step longer than this (m) is a jump: "
               "dropped, counted, and the odometry followed from the new pose.",
               read_only=True, min_value=0.01, max_value=1000.0),

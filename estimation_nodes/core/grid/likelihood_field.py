@@ -16,6 +16,7 @@ import numpy as np
 
 from estimation_nodes.core.errors import InvalidInputError, MapError
 from estimation_nodes.core.grid.occupancy import FREE, OCCUPIED, OccupancyMap
+from estimation_nodes.core.grid.scan_fit import FitField
 from estimation_nodes.core.grid.steps import GridModel, mounting_pose
 from estimation_nodes.core.validation import (
     as_real_array,
@@ -48,8 +49,9 @@ class SensorField:
 
 
 def grid_model(occupancy: OccupancyMap, resolution: float, heading_bins: int,
-               sensor: SensorField, max_states: int) -> GridModel:
-    """The localizer's state grid and likelihood field for ``occupancy``."""
+               sensor: SensorField, max_states: int, scan_fit: bool = False) -> GridModel:
+    """The localizer's state grid and likelihood field for ``occupancy``; with
+    ``scan_fit``, the field at the map's own resolution as well (grid/scan_fit.py)."""
     if not isinstance(occupancy, OccupancyMap) or not isinstance(sensor, SensorField):
         raise MapError(f"occupancy, sensor: expected an OccupancyMap and a SensorField, got "
                        f"{type(occupancy).__name__} and {type(sensor).__name__}")
@@ -79,10 +81,12 @@ def grid_model(occupancy: OccupancyMap, resolution: float, heading_bins: int,
         raise MapError("map: no free cell at this resolution")
     distance = distance_to_obstacles(cells, occupancy.resolution, sensor.max_distance)
     nearest = distance.reshape(rows, factor, cols, factor).min(axis=(1, 3))
-    return GridModel(free=free, log_field=log_field(nearest, sensor),
-                     log_outside=float(log_field(np.array(sensor.max_distance), sensor)),
+    log_outside = float(log_field(np.array(sensor.max_distance), sensor))
+    fit = FitField(log_field(distance, sensor), log_outside, occupancy.resolution,
+                   occupancy.origin, sensor.laser_pose) if scan_fit else None
+    return GridModel(free=free, log_field=log_field(nearest, sensor), log_outside=log_outside,
                      resolution=resolution, origin=occupancy.origin,
-                     heading_bins=heading_bins, laser_pose=sensor.laser_pose)
+                     heading_bins=heading_bins, laser_pose=sensor.laser_pose, scan_fit=fit)
 
 
 def log_field(distance: np.ndarray, sensor: SensorField) -> np.ndarray:

@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation_nodes.core.errors import InvalidInputError
+from estimation_nodes.core.grid import scan_fit
 from estimation_nodes.core.grid import steps as grid
 from estimation_nodes.core.grid import window
 from estimation_nodes.core.validation import (
@@ -114,6 +115,9 @@ class GridLocalization:
         #: (stamp ns, pose) of recent odometry, oldest first, for the pose at a scan's time.
         self._history: deque[tuple[int, Pose]] = deque(maxlen=ODOMETRY_HISTORY)
         self.updates = 0
+        #: The beams of the last update (ranges, angles), which the model's scan_fit
+        #: refines the pose with; None before the first and after a new prior.
+        self._last_scan: tuple[FloatArray, FloatArray] | None = None
 
     def global_localization(self) -> None:
         """Not knowing where the robot is: uniform over the free cells."""
@@ -130,6 +134,7 @@ class GridLocalization:
         """Take ``belief`` over the whole grid as the belief: with belief_floor > 0 without
         its states below the floor, and their windows noted."""
         self.belief, self.last_dropped = window.drop_below(belief, self._floor)
+        self._last_scan = None
         self._boxes = window.support_boxes(np.any(self.belief, axis=0)) \
             if self._floor > 0 else [window.full_box(self.model)]
 
@@ -225,6 +230,7 @@ class GridLocalization:
             self._hold(posterior)
         self.log_evidence = log_evidence
         self._reference = pose
+        self._last_scan = (ranges, angles)
         self.updates += 1
 
     def _dense_step(self, ranges: FloatArray, angles: FloatArray,
@@ -284,6 +290,18 @@ class GridLocalization:
         windows = [(box, window.window_of(self.belief, box)) for box in self._boxes]
         box, belief = max(windows, key=lambda pair: float(pair[1].max()))
         pose = grid._refined_pose(belief, model, grid._most_likely_state(belief), box)
+        estimate = self._around(windows, box, belief, pose, radius, angle)
+        if model.scan_fit is None or self._last_scan is None:
+            return estimate
+        # The belief's figures stay those of its own pose; the published pose is the
+        # scan's best fit within a state cell and a heading bin of it.
+        fitted = scan_fit.fitted_pose(model.scan_fit, pose, *self._last_scan,
+                                      model.resolution, model.bin_width)
+        return Estimate(fitted, estimate.covariance, estimate.quality)
+
+    def _around(self, windows: list, box: window.Box, belief: FloatArray, pose: Pose,
+                radius: float, angle: float) -> Estimate:
+        model = self.model
         if len(windows) == 1:
             return Estimate(pose, grid._covariance_around(belief, model, pose, box),
                             grid._mass_near(belief, model, pose, radius, angle, box))

@@ -96,6 +96,9 @@ class GridModel:
     laser_pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: The largest |log likelihood| one beam can score (in the field or outside it).
     log_bound: float = field(init=False, repr=False, compare=False)
+    #: The field at the map's own resolution (grid/scan_fit.py's FitField) that refines
+    #: the published pose, or None: the pose is the belief's (steps.refined_pose).
+    scan_fit: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         free = _booleans("free", self.free)
