@@ -66,6 +66,7 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
     # --every-scan: no motion threshold, every scan is an update (the default waits for
     # update_min_d or update_min_a of motion, as AMCL does)
     every = ["-p", "update_min_d:=0.0", "-p", "update_min_a:=0.0"] if args.every_scan else []
+    every += ["-p", "scan_fit:=false"] if args.no_scan_fit else []
     localizer = subprocess.Popen(
         [executable("grid_localizer"), "--ros-args", *grid, "-p", "max_states:=200000000",
          "-p", "diagnostics_period:=0.5", *every],
@@ -153,6 +154,8 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--every-scan", action="store_true",
                         help="update_min_d and update_min_a 0: every scan an update")
+    parser.add_argument("--no-scan-fit", action="store_true",
+                        help="scan_fit false: the pose is the belief's, not refined by the scan")
     args = parser.parse_args()
     log_path = LOGS.get(args.log, Path(args.log))
     if not log_path.exists():
