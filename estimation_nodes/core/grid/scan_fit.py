@@ -69,12 +69,12 @@ def fitted_pose(field: FitField, pose: tuple[float, float, float], ranges: Float
     best on ``field``, or ``pose`` itself when there is no beam or nothing scores better.
 
     A coarse-to-fine search: CANDIDATES^3 poses around the best so far, scored in one
-    pass, LEVELS times with the step halved (about 600 scores in five passes: a
-    millisecond, deterministic, and it cannot leave the reach)."""
+    pass, LEVELS times with the step halved (about 600 scores in five passes: about
+    2 ms for 60 beams, deterministic, and it cannot leave the reach)."""
     if ranges.size == 0:
         return pose
     start = np.array(pose, dtype=float)
-    best, best_score = start, float(field.scores(start[None], ranges, angles)[0])
+    best, best_score = start, field.score(start, ranges, angles)
     steps = np.array([reach_m, reach_m, reach_rad]) / (CANDIDATES - 1)
     offsets = np.arange(CANDIDATES) - (CANDIDATES - 1) / 2
     grid = np.stack(np.meshgrid(offsets, offsets, offsets, indexing="ij"), -1).reshape(-1, 3)

@@ -594,13 +594,12 @@ def scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray
 
 def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
                          compiled: bool = True,
-                         box: tuple[int, int, int, int] | None = None,
-                         whole_grid_kernels: bool = False) -> FloatArray:
+                         box: tuple[int, int, int, int] | None = None) -> FloatArray:
     """The scan's log likelihood over every state, or over the states of the window
     ``box`` (first row, row past the last, first column, column past the last; see
-    grid/window.py): (K, rows, columns) of the box. ``whole_grid_kernels``: the compiled
-    kernels or numpy's chosen by the grid's states, not the box's (numpy's costs a pass
-    per heading and beam, whatever the box's size)."""
+    grid/window.py): (K, rows, columns) of the box. The compiled kernels or numpy's are
+    chosen by the grid's states, not the box's: numpy's cost a pass per heading and
+    beam, whatever the box's size."""
     if ranges.size * model.log_bound > LOG_SUM_LIMIT:
         raise InvalidInputError(f"ranges: {ranges.size} beams over log likelihoods as large "
                                 f"as {model.log_bound:g} would overflow their sum")
@@ -613,8 +612,7 @@ def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArra
     pad_rows, pad_cols = pad_rows + r0, pad_cols + c0
     rows, cols = r1 - r0, c1 - c0
     shape = (model.heading_bins, rows, cols)
-    kernels = compiled_kernels(_states(model) if whole_grid_kernels else int(np.prod(shape)),
-                               compiled)
+    kernels = compiled_kernels(_states(model), compiled)
     if kernels is not None:
         out = np.empty(shape)      # the kernel writes every element
         kernels.scan_log_likelihood(padded, pad_rows, pad_cols, offsets, model.heading_bins,

@@ -214,8 +214,7 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridMo
     step = KIDNAP_STEP
     lattice_free = lattice_cells(model, phase)
     free_states = int(lattice_free.sum()) * -(-model.heading_bins // step)
-    lls = [grid._scan_log_likelihood(model, ranges, angles, compiled, box, whole_grid_kernels=True)
-           for box in boxes]
+    lls = [grid._scan_log_likelihood(model, ranges, angles, compiled, box) for box in boxes]
     lattice_ll = None
     if share > 0.0 and free_states > 0:
         lattice_ll = grid._scan_log_likelihood_strided(model, ranges, angles, step, compiled,
