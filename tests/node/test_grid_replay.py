@@ -162,8 +162,19 @@ def test_a_run_in_which_the_localizer_left_scans_out_replays_equal(context, exec
         for step in (11, 12):
             driver.odom(step)
             driver.scan(step, "is not due" if step == 11 else "updates")
-        # Its outputs: the start, each update, the reset and the prior.
-        published = 1 + localizer.localization.updates + 2
+        # An initial pose as `ros2 topic pub` sends one, without a stamp: answered with a
+        # pose stamped at the localizer's clock, which no recorded input's stamp explains.
+        unstamped = PoseWithCovarianceStamped()
+        fill_pose(unstamped.pose.pose, *pose(12))
+        unstamped.pose.covariance = np.diag([0.09, 0.09, 0, 0, 0, 0.02]).ravel().tolist()
+        taken = driver.counted("initialpose")
+        driver.send("/initialpose", unstamped)
+        driver.wait(taken, "take the unstamped initial pose")
+        driver.odom(13)
+        driver.odom(14)
+        driver.scan(14, "updates")
+        # Its outputs: the start, each update, the reset and the two priors.
+        published = 1 + localizer.localization.updates + 3
         heard = driver.heard
         driver.wait(lambda: all(heard(topic) == published for topic in OUTPUTS),
                     f"publish its {published} outputs (heard "
@@ -171,7 +182,7 @@ def test_a_run_in_which_the_localizer_left_scans_out_replays_equal(context, exec
     finally:
         driver.node.destroy_node()
         localizer.destroy_node()
-    assert localizer.localization.updates == 6       # scans 0, 2, 5, 8, 10, 12
+    assert localizer.localization.updates == 7       # scans 0, 2, 5, 8, 10, 12, 14
     assert localizer.handled["scan_superseded"] == 1
     assert localizer.rejected["scan_without_odometry"] == 1
 
@@ -186,8 +197,8 @@ def test_a_run_in_which_the_localizer_left_scans_out_replays_equal(context, exec
     writer.close()
 
     comparison = replay_grid(path, None, 1e-9)
-    assert comparison.differences == [] and comparison.compared == 6
-    assert dict(comparison.others) == {"start": 1, "reset": 1, "prior": 1}
+    assert comparison.differences == [] and comparison.compared == 7
+    assert dict(comparison.others) == {"start": 1, "reset": 1, "prior": 2}
     # Scans 4 and 7 were due by the rule: a replay taking every due scan would differ.
     assert comparison.left_out == 2
     with pytest.raises(SystemExit) as exit_code:

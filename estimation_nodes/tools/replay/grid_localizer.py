@@ -9,7 +9,11 @@ it published it (each message's publish time, DDS's source timestamp). Each
   (a scan superseded while it waited for the odometry of its time, one whose
   odometry never came, one it had no time for), and checks that its update
   rule takes each of them;
-- a pose stamped with a recorded ``initialpose``'s time is that prior;
+- a pose stamped with a recorded ``initialpose``'s time is that prior; an
+  initial pose sent without a stamp (``ros2 topic pub /initialpose`` as typed,
+  or a tool that leaves it 0) is answered with a pose stamped at the
+  localizer's clock, so such a prior is the first pose published after it that
+  no scan or stamped prior explains;
 - any other pose is a reset to the uniform belief: the start on a map (from
   map_file, or a /map message published since the localizer's last output)
   or ``~/global_localization`` (a service call, which is not recorded).
@@ -38,6 +42,7 @@ import numpy as np
 
 from estimation_nodes.core import errors
 from estimation_nodes.core.grid.localization import Estimate, GridLocalization
+from estimation_nodes.core.validation import check_covariance
 from estimation_nodes.nodes.grid_messages import (
     covariance_3x3,
     finite_pose,
@@ -156,9 +161,10 @@ def localizer_steps(records: list[Recorded], map_from_topic: bool) -> list[Step]
     """What the online localizer did, output by output, read from its outputs' stamps.
 
     ``records`` in the order they were published. A pose is an update when its stamp
-    is a recorded scan's, a prior when it is a recorded initial pose's, else a reset:
-    a start when it is the localizer's first output or, with ``map_from_topic``, when a
-    /map was published since its last one.
+    is a recorded scan's, a prior when it is a recorded initial pose's (or the first
+    pose after an unstamped one: the localizer stamps its answer with its own clock),
+    else a reset: a start when it is the localizer's first output or, with
+    ``map_from_topic``, when a /map was published since its last one.
     """
     scans: dict[int, list] = defaultdict(list)
     priors: dict[int, list] = defaultdict(list)
@@ -170,9 +176,13 @@ def localizer_steps(records: list[Recorded], map_from_topic: bool) -> list[Step]
     steps: list[Step] = []
     quality: float | None = None
     maps_since: list = []
+    unstamped_priors: list = []          # sent, not answered yet, in the order sent
     for record in records:
         if record.topic == MAP:
             maps_since.append(record.msg)
+        elif record.topic == INITIAL_POSE and not header_stamp_ns(record.msg):
+            if _acceptable_prior(record.msg):
+                unstamped_priors.append(record.msg)
         elif record.topic == QUALITY:
             quality = record.msg.data
         elif record.topic == POSE:
@@ -181,6 +191,8 @@ def localizer_steps(records: list[Recorded], map_from_topic: bool) -> list[Step]
                 steps.append(Step("update", record.msg, quality, scan=scans[stamp].pop(0)))
             elif priors.get(stamp):
                 steps.append(Step("prior", record.msg, quality, prior=priors[stamp].pop(0)))
+            elif unstamped_priors and steps:
+                steps.append(Step("prior", record.msg, quality, prior=unstamped_priors.pop(0)))
             elif not steps or (map_from_topic and maps_since):
                 steps.append(Step("start", record.msg, quality,
                                   maps=tuple(maps_since) if map_from_topic else ()))
@@ -190,6 +202,19 @@ def localizer_steps(records: list[Recorded], map_from_topic: bool) -> list[Step]
                 maps_since = []
             quality = None
     return steps
+
+
+def _acceptable_prior(msg) -> bool:
+    """Whether the localizer answers this initial pose (it drops one that is not
+    finite, or whose covariance is not one: see GridLocalizer._on_initial_pose)."""
+    pose, covariance = planar_pose(msg.pose.pose), covariance_3x3(msg.pose.covariance)
+    if not (finite_pose(pose) and np.isfinite(covariance).all()):
+        return False
+    try:
+        check_covariance("covariance", covariance, 3)
+    except errors.EstimationError:
+        return False
+    return True
 
 
 def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> GridComparison:
