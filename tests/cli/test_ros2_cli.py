@@ -300,6 +300,20 @@ def stamp_s(header: dict) -> float:
     return header["stamp"]["sec"] + header["stamp"]["nanosec"] * 1e-9
 
 
+def found_pose(pose: dict) -> dict | None:
+    """``pose`` if its position variance says the robot is found (the corridor's uniform
+    belief has tens of m²), else None.
+
+    A CI run's `echo --once` of the latched /pose (depth 1) printed the localizer's first,
+    uniform pose, stamped at its start, 1.5 s after an echo of /localization_quality had
+    printed 0.99, which the localizer publishes just before the pose that goes with it. Why
+    DDS handed that reader the older sample is not known; a user would ask again, and so
+    does this test. The distance to the truth below is still asserted.
+    """
+    covariance = np.array(pose["pose"]["covariance"]).reshape(6, 6)
+    return pose if covariance[0, 0] + covariance[1, 1] < 4.0 else None
+
+
 @time_limit(240)
 def test_grid_localization_run_with_ros2_run_and_watched_with_the_cli(ros2, ros2_start,
                                                                       tmp_path):
@@ -328,7 +342,9 @@ def test_grid_localization_run_with_ros2_run_and_watched_with_the_cli(ros2, ros2
         return echo(ros2, "/localization_quality", "std_msgs/msg/Float64")["data"]
 
     wait_for(lambda: quality() > 0.9, limit, "localization_quality above 0.9")
-    pose = echo(ros2, "/pose", "geometry_msgs/msg/PoseWithCovarianceStamped")
+    pose = wait_for(lambda: found_pose(echo(ros2, "/pose",
+                                            "geometry_msgs/msg/PoseWithCovarianceStamped")),
+                    limit, "a /pose of the found robot")
     truth = echo(ros2, "/true_pose", "geometry_msgs/msg/PoseStamped")
     assert pose["header"]["frame_id"] == "map"
     covariance = np.array(pose["pose"]["covariance"]).reshape(6, 6)
