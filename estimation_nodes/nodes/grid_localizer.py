@@ -42,7 +42,8 @@ from std_srvs.srv import Trigger
 
 from estimation_nodes.core import errors
 from estimation_nodes.core.grid import steps as grid
-from estimation_nodes.core.grid.localization import ODOMETRY_HISTORY, GridLocalization
+from estimation_nodes.core.grid.localization import (ODOMETRY_HISTORY, GridLocalization,
+                                                     OdometryStep)
 from estimation_nodes.nodes.diagnostics import status_array
 from estimation_nodes.nodes.grid_messages import (
     covariance_3x3,
@@ -149,9 +150,14 @@ class GridLocalizer(Node):
             return
         if self.localization is None:
             return
-        if not self.localization.on_odometry(pose, stamp_or_none(msg.header.stamp)):
+        step = self.localization.on_odometry(pose, stamp_or_none(msg.header.stamp))
+        if step is OdometryStep.JUMP:
             self._reject("odom_jump", f"odom jumped more than {self._settings.max_odom_jump} m:"
                          " not taken as motion; followed from the new pose")
+            return
+        if step is OdometryStep.REPEATED_STAMP:
+            self._reject("repeated_odom_stamp", "odom ignored: stamped as the one before it"
+                         " (the first pose at a time is kept)")
             return
         self.handled["odom"] += 1
         waiting = self._waiting_scan

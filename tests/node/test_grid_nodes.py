@@ -116,6 +116,21 @@ def test_bad_messages_are_dropped_counted_and_never_make_a_nan_belief(nodes, exe
     assert np.all(np.isfinite(belief)) and belief.sum() == pytest.approx(1.0)
 
 
+def test_a_repeated_odometry_stamp_is_counted_and_the_first_pose_kept(nodes, executor,
+                                                                       collector_factory):
+    localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=8)
+    driver = collector_factory({"pose": PoseWithCovarianceStamped}, name="driver")
+    wheels = driver.node.create_publisher(Odometry, "odom", 10)
+    assert spin_until(executor, lambda: wheels.get_subscription_count() > 0, 10.0)
+    for x in (1.0, 1.2):                        # one stamp, two poses (as real logs have)
+        msg = odom(x, 0.0, 0.0)
+        msg.header.stamp.sec = 7
+        wheels.publish(msg)
+    assert spin_until(executor, lambda: localizer.rejected["repeated_odom_stamp"] == 1, 5.0)
+    assert localizer.handled["odom"] == 1
+    assert localizer.localization._odometry_at(7 * 10**9) == pytest.approx((1.0, 0.0, 0.0))
+
+
 def test_scans_the_localizer_never_saw_are_counted_and_reported(nodes, executor,
                                                                collector_factory):
     localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=8,

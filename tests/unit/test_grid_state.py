@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from estimation_nodes.core.errors import InvalidInputError
-from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.core.grid.localization import GridLocalization, OdometryStep
 from estimation_nodes.params.grid import default_odometry_noise
 from tests.unit.test_grid import small_model
 
@@ -50,8 +50,28 @@ def test_an_odometry_jump_is_not_motion():
     loc = localization()
     loc.on_odometry((0.0, 0.0, 0.0), 1 * SECOND)
     loc.update(np.array([0.5]), np.array([0.0]), 1 * SECOND)
-    assert not loc.on_odometry((5.0, 0.0, 0.0), 2 * SECOND)
+    assert loc.on_odometry((5.0, 0.0, 0.0), 2 * SECOND) is OdometryStep.JUMP
     assert not loc.due(2 * SECOND)                          # followed from the new pose
+
+
+def test_the_first_odometry_at_a_stamp_is_that_time_s_pose_whenever_the_scan_comes():
+    """Real logs repeat odometry stamps with different poses. Live, a scan of that time is
+    answered as soon as the first came; replayed, after all of them: the same belief."""
+    live, replayed = localization(), localization()
+    for loc in (live, replayed):
+        loc.on_odometry((0.0, 0.0, 0.0), 1 * SECOND)
+        loc.update(np.array([0.5]), np.array([0.0]), 1 * SECOND)
+        assert loc.on_odometry((0.4, 0.0, 0.0), 2 * SECOND) is OdometryStep.TAKEN
+    assert live.odometry_covers(2 * SECOND)
+    live.update(np.array([0.7, 0.2]), np.array([0.0, math.pi / 2]), 2 * SECOND)
+    assert replayed.on_odometry((0.6, 0.1, 0.3), 2 * SECOND) is OdometryStep.REPEATED_STAMP
+    assert live.on_odometry((0.6, 0.1, 0.3), 2 * SECOND) is OdometryStep.REPEATED_STAMP
+    replayed.update(np.array([0.7, 0.2]), np.array([0.0, math.pi / 2]), 2 * SECOND)
+    np.testing.assert_array_equal(live.belief, replayed.belief)
+    # The next step is measured from the first pose (turned 0.3 rad since), not the ignored.
+    for loc in (live, replayed):
+        loc.on_odometry((0.5, 0.0, 0.3), 3 * SECOND)
+        assert loc.due(3 * SECOND)
 
 
 def test_kidnap_probability_keeps_a_uniform_share():

@@ -38,6 +38,7 @@ import math
 from bisect import bisect_right
 from collections import deque
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
@@ -66,6 +67,20 @@ class Estimate:
     pose: Pose
     covariance: FloatArray
     quality: float
+
+
+class OdometryStep(Enum):
+    """How ``GridLocalization.on_odometry`` took a message."""
+
+    #: Followed as motion.
+    TAKEN = "taken"
+    #: Farther than max_odom_jump from the last pose: not motion; followed from the new pose.
+    JUMP = "jump"
+    #: Stamped as the last one taken: ignored. The first pose at a time is that time's pose
+    #: (tf2 keeps the first of repeated data too), so a scan of that time predicts with the
+    #: same odometry whether it is answered live, as soon as that first one came, or
+    #: replayed after all of them (real logs repeat stamps: Intel's 2318 times).
+    REPEATED_STAMP = "repeated stamp"
 
 
 class GridLocalization:
@@ -161,10 +176,12 @@ class GridLocalization:
         self._boxes = window.support_boxes(footprint)
         self.last_dropped = dropped + correction.left_out
 
-    def on_odometry(self, pose: Pose, stamp_ns: int | None = None) -> bool:
-        """Follow odometry; False when the step was a jump (not taken as motion)."""
+    def on_odometry(self, pose: Pose, stamp_ns: int | None = None) -> OdometryStep:
+        """Follow odometry: how the message was taken (see ``OdometryStep``)."""
         pose = grid.check_pose("pose", pose)
         stamp_ns = _stamp(stamp_ns)
+        if stamp_ns is not None and self._history and stamp_ns == self._history[-1][0]:
+            return OdometryStep.REPEATED_STAMP
         latest = self._latest
         if latest is not None and math.hypot(pose[0] - latest[0],
                                              pose[1] - latest[1]) > self._max_jump:
@@ -174,10 +191,10 @@ class GridLocalization:
             if self._reference is not None:
                 self._reference = pose
             self._remember(pose, stamp_ns)
-            return False
+            return OdometryStep.JUMP
         self._latest = pose
         self._remember(pose, stamp_ns)
-        return True
+        return OdometryStep.TAKEN
 
     def _remember(self, pose: Pose, stamp_ns: int | None) -> None:
         if stamp_ns is not None and (not self._history or stamp_ns >= self._history[-1][0]):
