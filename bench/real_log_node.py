@@ -2,7 +2,7 @@
 
     python bench/real_log_node.py [--log intel|aces|PATH] [--scan-rate 10]
         [--resolution 0.1] [--heading-bins 72] [--max-odom-jump 5] [--seconds S]
-        [--picture FILE.png] [--keep DIR]
+        [--picture FILE.png] [--keep DIR] [--record FILE.mcap]
 
 What a user does with a CARMEN log, through the real executables: ``estimation_import
 carmen`` makes a recording, ``estimation_map`` a map from its corrected poses (0.05 m),
@@ -16,6 +16,12 @@ Printed: the scans played and their rate, what the node did with them from its
 /diagnostics (updated, not due for lack of motion, missed, rejected), its update time
 (median and maximum, its own measure), its peak resident memory (VmHWM), and the
 published poses against the corrected pose of their scan (paired by stamp).
+
+With ``--record`` the bench also records the run as ``estimation_demo --record`` does
+(the scans and odometry as the bench's node heard them, the initial pose it sent, the
+localizer's poses and qualities, its parameters in the metadata) and runs
+``estimation_replay`` on the file: the localizer offline over the same inputs must
+publish the same poses (EQUAL).
 """
 
 from __future__ import annotations
@@ -93,6 +99,31 @@ class Watcher:
                                                   10)
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
+        #: (topic, raw message, publish time in ns) of everything recorded, in arrival order.
+        self.recorded: list[tuple[str, bytes, int]] = []
+
+    def record(self) -> None:
+        """Keep every input the localizer hears and every pose and quality it publishes,
+        raw, with their publish (source) times, as the demo's recorder does."""
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        from nav_msgs.msg import Odometry
+        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from sensor_msgs.msg import LaserScan
+        from std_msgs.msg import Float64
+
+        from estimation_nodes.nodes.qos import latched_qos
+
+        best_effort = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
+        for topic, (kind, qos) in {"/scan": (LaserScan, best_effort), "/odom": (Odometry, 1000),
+                                   "/pose": (PoseWithCovarianceStamped, latched_qos(1000)),
+                                   "/localization_quality": (Float64, latched_qos(1000)),
+                                   }.items():
+            self.node.create_subscription(kind, topic, self._keep(topic), qos, raw=True)
+
+    def _keep(self, topic: str):
+        def keep(data: bytes, info) -> None:
+            self.recorded.append((topic, data, info["source_timestamp"]))
+        return keep
 
     def _on_pose(self, msg) -> None:
         from estimation_nodes.nodes.grid_messages import planar_pose
@@ -117,6 +148,8 @@ class Watcher:
         covariance[5, 5] = PRIOR_SIGMA_RAD ** 2
         msg.pose.covariance = covariance.ravel().tolist()
         self.initial.publish(msg)
+        from rclpy.serialization import serialize_message
+        self.recorded.append(("/initialpose", serialize_message(msg), time.time_ns()))
 
     def spin(self, condition, timeout: float) -> bool:
         return spin_until(self.executor, condition, timeout)
@@ -130,14 +163,16 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
     period = float(np.median(np.diff([scan.t for scan in log.scans])))
     rate = period * args.scan_rate
     env = confine_ros(87)
+    parameters_yaml = localizer_parameters(args, map_yaml)
+    (work / "localizer.yaml").write_text(parameters_yaml)
     localizer = subprocess.Popen(
-        [executable("grid_localizer"), "--ros-args", "-p", f"map_file:={map_yaml}",
-         "-p", f"resolution:={args.resolution}", "-p", f"heading_bins:={args.heading_bins}",
-         "-p", "max_states:=200000000", "-p", f"laser_max_range:={RANGE_MAX}",
-         "-p", "diagnostics_period:=0.5", "-p", f"max_odom_jump:={args.max_odom_jump}"],
+        [executable("grid_localizer"), "--ros-args", "--params-file",
+         str(work / "localizer.yaml")],
         env=env, stdout=(work / "localizer.log").open("w"), stderr=subprocess.STDOUT)
     rclpy.init()
     watcher = Watcher()
+    if args.record:
+        watcher.record()
     play = None
     try:
         if not wait_for_line(localizer, work / "localizer.log", "ready:", 300):
@@ -165,7 +200,43 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
         end_run(play, localizer, watcher.node)
     if args.picture:
         draw(log, watcher, map_yaml, args.picture, log_path.name)
-    return summary(log, watcher, rate, played_s, peak)
+    rows = summary(log, watcher, rate, played_s, peak)
+    if args.record:
+        rows += record_and_replay(watcher, parameters_yaml, args.record)
+    return rows
+
+
+def localizer_parameters(args: argparse.Namespace, map_yaml: Path) -> str:
+    """The localizer's parameter file, as YAML: given to the node and kept in a recording."""
+    import yaml
+
+    return yaml.safe_dump({"/grid_localizer": {"ros__parameters": {
+        "map_file": str(map_yaml), "resolution": args.resolution,
+        "heading_bins": args.heading_bins, "max_states": 200_000_000,
+        "laser_max_range": RANGE_MAX, "diagnostics_period": 0.5,
+        "max_odom_jump": args.max_odom_jump}}})
+
+
+def record_and_replay(watcher: Watcher, parameters_yaml: str, path: Path) -> list[list[str]]:
+    """Write what the watcher recorded to ``path`` and run estimation_replay on it."""
+    from estimation_nodes.tools.recording.mcap import McapRunWriter
+
+    types = {"/scan": "sensor_msgs/msg/LaserScan", "/odom": "nav_msgs/msg/Odometry",
+             "/initialpose": "geometry_msgs/msg/PoseWithCovarianceStamped",
+             "/pose": "geometry_msgs/msg/PoseWithCovarianceStamped",
+             "/localization_quality": "std_msgs/msg/Float64"}
+    writer = McapRunWriter(path, types, {"parameters_yaml": parameters_yaml, "kind": "grid"})
+    for topic, data, published_ns in watcher.recorded:
+        writer.write(topic, data, published_ns, published_ns)
+    writer.close()
+    started = time.monotonic()
+    replay = subprocess.run([executable("estimation_replay"), str(path)],
+                            capture_output=True, text=True)
+    print(replay.stdout + replay.stderr)
+    verdict = (replay.stdout.strip().splitlines() or ["(no output)"])[-1]
+    return [["recording", f"{path} ({len(watcher.recorded)} messages)"],
+            ["estimation_replay", f"{verdict} (exit {replay.returncode}, "
+             f"{time.monotonic() - started:.0f} s)"]]
 
 
 def draw(log, watcher: Watcher, map_yaml: Path, output: Path, name: str) -> None:
@@ -277,6 +348,8 @@ def main() -> None:
     parser.add_argument("--keep", type=Path, metavar="DIR",
                         help="make the recording, map and the processes' logs in DIR and "
                              "keep them (default: a temporary folder)")
+    parser.add_argument("--record", type=Path, metavar="FILE.mcap",
+                        help="record the run and check it with estimation_replay")
     args = parser.parse_args()
     log_path = LOGS.get(args.log, Path(args.log))
     if not log_path.exists():
