@@ -81,13 +81,13 @@ def run_filter(run, model, initial_covariance, correct: bool | str = True):
             localization.on_odometry(t, v, w)
         elif correct == "oracle":
             localization.on_frame(t, [])
-            localization.x = truth_at(run, t)
+            localization.x = np.append(truth_at(run, t), localization.x[3:])
         else:
             localization.on_frame(t, [Observation(int(s), r, b)
                                       for _, s, r, b in frames[index][1]])
         times.append(t)
-        poses.append(localization.x)
-        covariances.append(localization.P)
+        poses.append(localization.pose)
+        covariances.append(localization.pose_covariance)
     elapsed = time.perf_counter() - started
     return np.array(times), np.array(poses), np.array(covariances), elapsed, localization
 
@@ -170,15 +170,19 @@ def main() -> None:
             s = score(run, times, poses, covs)
             # the floor's covariance is odometry's alone, never corrected: not scored
             in_ellipse = "-" if correct == "oracle" else f"{s['in_ellipse']:.0%}"
+            scale, scale_std = loc.range_scale
+            observed = scale_std and loc.counts.get("used")
+            learned = f"{scale:.4f} +- {scale_std:.4f}" if observed else "-"
             rows.append([str(robot), name, f"{s['position_rmse']:.3f}",
                          f"{s['heading_rmse_deg']:.1f}", in_ellipse,
-                         f"{s['longest_off_s']:.1f}", f"{elapsed:.2f}",
+                         f"{s['longest_off_s']:.1f}", f"{elapsed:.2f}", learned,
                          ", ".join(f"{k} {v}" for k, v in sorted(loc.counts.items()))])
     source = "each robot with the figures of the others" if args.cross_validate \
         else str(args.params)
     print(f"parameters: {source}")
     print(table(["robot", "filter", "position RMSE (m)", "heading RMSE (deg)",
-                 "truth in 95% ellipse", "longest > 0.5 m (s)", "run time (s)", "counts"],
+                 "truth in 95% ellipse", "longest > 0.5 m (s)", "run time (s)",
+                 "range scale at the end", "counts"],
                 rows))
 
 

@@ -205,8 +205,8 @@ class EkfLocalizer(Node):
     def _publish(self) -> None:
         localization = self.localization
         assert localization is not None
-        msg = pose_with_covariance(self._pose_msg, tuple(localization.x.tolist()),
-                                   localization.P)
+        msg = pose_with_covariance(self._pose_msg, tuple(localization.pose.tolist()),
+                                   localization.pose_covariance)
         seconds, nanoseconds = divmod(self._newest_ns, 1_000_000_000)
         msg.header.stamp.sec, msg.header.stamp.nanosec = seconds, nanoseconds
         msg.header.frame_id = self._settings.frame_id
@@ -220,11 +220,15 @@ class EkfLocalizer(Node):
         values: dict[str, Any] = {"filter": self._settings.model.kind}
         localization = self.localization
         if localization is not None:
-            x, P = localization.x, localization.P
+            x, P = localization.pose, localization.pose_covariance
             values.update({"pose_x": f"{x[0]:.3f}", "pose_y": f"{x[1]:.3f}",
                            "pose_yaw_deg": f"{math.degrees(x[2]):.1f}",
                            "std_xy": f"{math.sqrt(max(P[0, 0], P[1, 1])):.3f}",
                            "lost": str(localization.lost).lower()})
+            scale, scale_std = localization.range_scale
+            if scale_std > 0:
+                values.update({"range_scale": f"{scale:.4f}",
+                               "range_scale_std": f"{scale_std:.4f}"})
             values.update({f"observations.{k}": v
                            for k, v in sorted(localization.counts.items())})
         if self._nis:

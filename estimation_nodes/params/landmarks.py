@@ -34,8 +34,9 @@ def landmark_model(values: Mapping[str, Any],
                    landmarks: Mapping[int, tuple[float, float]]) -> LandmarkModel:
     """The filter's model; ValueError naming the first bad parameter."""
     kind = values["filter"]
-    points = SigmaPoints(values["ukf.alpha"], values["ukf.beta"], values["ukf.kappa"]) \
-        if kind == "ukf" else None
+    scale_std = bounded("range_scale_std", values["range_scale_std"])
+    points = SigmaPoints(values["ukf.alpha"], values["ukf.beta"], values["ukf.kappa"],
+                         n=4 if scale_std > 0 else 3) if kind == "ukf" else None
     noise = UnicycleNoise(**{name: bounded(f"noise.{name}", values[f"noise.{name}"])
                              for name in NOISE_NAMES})
     return LandmarkModel(kind, noise, bounded("range_std", values["range_std"]),
@@ -50,7 +51,7 @@ def landmark_model(values: Mapping[str, Any],
                          int(bounded("ekf.iterations", values["ekf.iterations"])),
                          bounded("odometry_delay", values["odometry_delay"]),
                          _pair("odometry_scale", values["odometry_scale"],
-                               "[forward, turn]"))
+                               "[forward, turn]"), scale_std)
 
 
 def _pair(name: str, value: Any, shape: str = "[position, heading]") -> tuple[float, float]:

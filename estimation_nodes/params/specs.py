@@ -379,6 +379,10 @@ LANDMARK_MODEL_SPECS = (
               "axis, range cos(bearing), as a camera that ranges by apparent size reports)."),
     ParamSpec("range_scale", 1.0, "The sensor reports this many times the true range (a "
               "calibration; 1 for a calibrated sensor).", min_value=0.5, max_value=2.0),
+    ParamSpec("range_scale_std", 0.0, "Estimate the range's scale with the pose, from a "
+              "prior of range_scale with this std (a fourth state; 0: range_scale is taken "
+              "as exact). For a camera whose scale is known to a few percent only.",
+              read_only=True, min_value=0.0, max_value=1.0),
     ParamSpec("odometry_delay", 0.0, "Seconds between an odometry message's stamp and the "
               "robot driving its twist (0 for measured speeds; a robot that reports its "
               "commands follows them late).", read_only=True, min_value=0.0, max_value=10.0),

@@ -93,13 +93,16 @@ def offline(events, values):
     return localization
 
 
-@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+@pytest.mark.parametrize("kind, scale_std", [("ekf", 0.0), ("ukf", 0.0), ("ekf", 0.05),
+                                             ("ukf", 0.05)])
 def test_the_published_pose_is_the_offline_filter_s(localizer, collector_factory, executor,
-                                                    landmarks_file, kind):
+                                                    landmarks_file, kind, scale_std):
     # All 20 s of events at once, the two topics taken in whatever order: a horizon as
-    # long as the run lets every late event take its place.
+    # long as the run lets every late event take its place. With scale_std the range's
+    # scale is a fourth state: the pose published is the state's pose part.
     node = localizer(filter=kind, initial_pose=[0.0, 0.0, 0.3],
-                     initial_covariance=[0.04, 0.04, 0.02], reorder_horizon=30.0)
+                     initial_covariance=[0.04, 0.04, 0.02], reorder_horizon=30.0,
+                     range_scale_std=scale_std)
     seen = collector_factory({"pose": PoseWithCovarianceStamped})
     publisher_node = seen.node
     odom_pub = publisher_node.create_publisher(Odometry, "odom", INPUT_QOS)
@@ -116,8 +119,10 @@ def test_the_published_pose_is_the_offline_filter_s(localizer, collector_factory
                       == len(events), 30), node.handled
     values = {**spec_defaults(EKF_LOCALIZER_SPECS), "filter": kind,
               "landmarks_file": str(landmarks_file), "initial_pose": [0.0, 0.0, 0.3],
-              "initial_covariance": [0.04, 0.04, 0.02], "reorder_horizon": 30.0}
+              "initial_covariance": [0.04, 0.04, 0.02], "reorder_horizon": 30.0,
+              "range_scale_std": scale_std}
     expected = offline(events, values)
+    assert expected.x.size == (4 if scale_std else 3)
     np.testing.assert_allclose(node.localization.x, expected.x, atol=1e-12)
     np.testing.assert_allclose(node.localization.P, expected.P, atol=1e-12)
     assert spin_until(executor, lambda: seen.count("pose") >= 1, 10)
@@ -127,8 +132,8 @@ def test_the_published_pose_is_the_offline_filter_s(localizer, collector_factory
         + seen.messages["pose"][-1].header.stamp.nanosec * 1e-9 - last_t) < 1e-6, 10)
     published = seen.messages["pose"][-1]
     np.testing.assert_allclose(planar_pose(published.pose.pose)[:2], expected.x[:2], atol=1e-9)
-    np.testing.assert_allclose(covariance_3x3(published.pose.covariance), expected.P,
-                               atol=1e-12)
+    np.testing.assert_allclose(covariance_3x3(published.pose.covariance),
+                               expected.pose_covariance, atol=1e-12)
     assert published.header.frame_id == "map"
     assert node.localization.counts == expected.counts
     assert "events_too_late" not in node.handled

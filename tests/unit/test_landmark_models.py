@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from estimation_nodes.core.compiled_loader import load_kernels
-from estimation_nodes.core.kalman import ekf, range_bearing, ukf
+from estimation_nodes.core.kalman import ekf, range_bearing, ukf, unicycle
 from estimation_nodes.core.kalman.landmarks import LandmarkLocalization, LandmarkModel, Observation
 from estimation_nodes.core.kalman.range_bearing import Ranging, SensorPose
 from estimation_nodes.core.kalman.unicycle import UnicycleNoise, wrap
@@ -257,13 +257,20 @@ def test_the_shipped_figures_are_what_the_calibration_derives():
                                        err_msg=name)
 
 
-def test_the_written_out_prediction_is_the_matrix_one():
+def random_motion(rng, n: int = 3):
+    """A state of ``n`` (the pose, and a range scale near 1 for 4), a covariance, a step."""
+    x = np.append(rng.normal(0, 2, 3), 1.0 + rng.normal(0, 0.05, n - 3))
+    x[2] = wrap(x[2])
+    A = rng.normal(0, 0.3, (n, n))
+    P = A @ A.T + np.eye(n) * 1e-3
+    return x, P, rng.normal(0, 0.5), rng.normal(0, 1.0), rng.uniform(0, 0.2)
+
+
+@pytest.mark.parametrize("n", [3, 4])
+def test_the_written_out_prediction_is_the_matrix_one(n):
     rng = np.random.default_rng(7)
     for _ in range(200):
-        x = rng.normal(0, 2, 3)
-        A = rng.normal(0, 0.3, (3, 3))
-        P = A @ A.T + np.eye(3) * 1e-3
-        v, w, dt = rng.normal(0, 0.5), rng.normal(0, 1.0), rng.uniform(0, 0.2)
+        x, P, v, w, dt = random_motion(rng, n)
         fast = ekf.predict(x, P, v, w, dt, NOISE)
         matrices = ekf.predict_by_matrices(x, P, v, w, dt, NOISE)
         np.testing.assert_allclose(fast[0], matrices[0], rtol=0, atol=1e-15)
@@ -277,15 +284,12 @@ def test_the_written_out_prediction_is_the_matrix_one():
 
 @pytest.mark.skipif(load_kernels("estimation_nodes.core.kalman.compiled") is None,
                     reason="numba does not import here")
-def test_the_compiled_unscented_prediction_is_numpys():
+@pytest.mark.parametrize("n", [3, 4])
+def test_the_compiled_unscented_prediction_is_numpys(n):
     rng = np.random.default_rng(8)
-    points = ukf.SigmaPoints(0.5, 2.0, 0.0)
+    points = ukf.SigmaPoints(0.5, 2.0, 0.0, n=n)
     for _ in range(200):
-        x = rng.normal(0, 2, 3)
-        x[2] = wrap(x[2])
-        A = rng.normal(0, 0.3, (3, 3))
-        P = A @ A.T + np.eye(3) * 1e-3
-        v, w, dt = rng.normal(0, 0.5), rng.normal(0, 1.0), rng.uniform(0, 0.2)
+        x, P, v, w, dt = random_motion(rng, n)
         compiled = ukf.predict(x, P, v, w, dt, NOISE, points)
         reference = ukf.predict_numpy(x, P, v, w, dt, NOISE, points)
         np.testing.assert_allclose(compiled[0], reference[0], rtol=0, atol=1e-13)
@@ -293,7 +297,7 @@ def test_the_compiled_unscented_prediction_is_numpys():
     # no Cholesky factor: numpy's error, from either path
     for compiled in (True, False):
         with pytest.raises(np.linalg.LinAlgError):
-            ukf.predict(x, -np.eye(3), 0.1, 0.0, 0.1, NOISE, points, compiled)
+            ukf.predict(x, -np.eye(n), 0.1, 0.0, 0.1, NOISE, points, compiled)
 
 
 def test_a_new_model_brings_its_gate():
@@ -308,3 +312,92 @@ def test_a_new_model_brings_its_gate():
                                         np.eye(3) * 1e-6, 0.0)
     localization.model = model(gate_probability=0.95)
     assert [o.verdict for o in localization.on_frame(0.0, [far])] == ["gated"]
+
+
+# --- the range's scale as a fourth state -------------------------------------------------
+
+@pytest.mark.parametrize("ranging", [Ranging(), DEPTH])
+def test_the_jacobian_with_the_scale_state_is_its_derivative(ranging):
+    x = np.array([1.0, 2.0, 0.7, 1.04])
+    for landmark in [(2.0, 1.0), (-1.5, 2.5), (0.5, -2.0)]:
+        expected = numeric_jacobian(
+            lambda s, lm=landmark: range_bearing.expected(s, lm, SENSOR, ranging), x)
+        H = range_bearing.jacobian(x, landmark, SENSOR, ranging)
+        assert H.shape == (2, 4)
+        np.testing.assert_allclose(H, expected, atol=1e-7)
+    # the state's scale, not the model's, is the one seen
+    assert range_bearing.expected(x, (2.0, 1.0), SENSOR, ranging)[0] == pytest.approx(
+        1.04 / ranging.scale * range_bearing.expected(x[:3], (2.0, 1.0), SENSOR, ranging)[0])
+
+
+def test_the_prediction_with_the_scale_state_moves_the_pose_and_keeps_the_scale():
+    rng = np.random.default_rng(9)
+    points = ukf.SigmaPoints(0.5, 2.0, 0.0, n=4)
+    for _ in range(100):
+        x, P, v, w, dt = random_motion(rng, 4)
+        fast = ekf.predict(x, P, v, w, dt, NOISE)
+        # the pose's block is the three-state prediction's; the scale and its variance stay
+        three = ekf.predict(x[:3], P[:3, :3], v, w, dt, NOISE)
+        np.testing.assert_allclose(fast[1][:3, :3], three[1], rtol=1e-13, atol=1e-15)
+        assert fast[0][3] == x[3] and fast[1][3, 3] == P[3, 3]
+        unscented = ukf.predict(x, P, v, w, dt, NOISE, points)
+        assert unscented[0][3] == pytest.approx(x[3], abs=1e-12)
+        assert unscented[1][3, 3] == pytest.approx(P[3, 3], rel=1e-9)
+
+
+def _scaled_run(kind: str, scale_std: float, true_scale: float = 1.06):
+    """A robot driving a loop among four landmarks, its camera ranging ``true_scale``
+    times the depth while the model's prior says 1.0."""
+    rng = np.random.default_rng(11)
+    landmarks = {6: (3.0, 1.5), 7: (3.0, -1.5), 8: (-1.0, 2.5), 9: (5.0, 0.5)}
+    n = 4 if scale_std > 0 else 3
+    points = ukf.SigmaPoints(0.5, 2.0, 0.0, n=n) if kind == "ukf" else None
+    filter_model = model(kind=kind, points=points, ranging=Ranging("depth", 1.0),
+                         landmarks=landmarks, sensor=SensorPose(0.0, 0.0, 0.0),
+                         range_std=0.005, range_std_per_m=0.0, bearing_std=0.005,
+                         range_scale_std=scale_std)
+    localization = LandmarkLocalization(filter_model, [0.0, 0.0, 0.0], np.eye(3) * 0.01, 0.0)
+    truth = Ranging("depth", true_scale)
+    pose = np.zeros(3)
+    for step in range(1, 1501):
+        t = 0.02 * step
+        localization.on_odometry(t, 0.3, 0.25)
+        pose = unicycle.move(pose, 0.3, 0.25, 0.02)
+        if step % 10 == 0:
+            seen = []
+            for key, landmark in landmarks.items():
+                r, b = range_bearing.expected(pose, landmark, SensorPose(0, 0, 0), truth)
+                if r > 0.3 and abs(b) < 1.2:                   # in front of the camera
+                    seen.append(Observation(key, r + rng.normal(0, 0.005),
+                                            b + rng.normal(0, 0.005)))
+            localization.on_frame(t, seen)
+    return localization, pose
+
+
+@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+def test_a_wrong_range_scale_is_learned_as_the_fourth_state(kind):
+    """A camera 6% long, a prior of 1.0: fixed, the scale pulls the pose off; estimated,
+    the filter finds it, and the pose with it."""
+    fixed, pose = _scaled_run(kind, 0.0)
+    learned, _ = _scaled_run(kind, 0.1)
+    scale, scale_std = learned.range_scale
+    assert abs(scale - 1.06) < 3 * scale_std < 0.01
+    assert fixed.range_scale == (1.0, 0.0)
+    error = {name: float(np.hypot(*(loc.pose[:2] - pose[:2])))
+             for name, loc in (("fixed", fixed), ("learned", learned))}
+    assert error["learned"] < 0.02 < error["fixed"]
+    assert learned.pose.shape == (3,) and learned.pose_covariance.shape == (3, 3)
+
+
+def test_the_scale_state_needs_sigma_points_of_its_size_and_stays_fixed():
+    with pytest.raises(ValueError, match="sigma points"):
+        model(kind="ukf", points=ukf.SigmaPoints(0.5, 2.0, 0.0), range_scale_std=0.05)
+    for bad in (-0.1, math.nan, 2.0):
+        with pytest.raises(ValueError, match="range_scale_std"):
+            model(range_scale_std=bad)
+    localization = LandmarkLocalization(model(range_scale_std=0.05), [0.0, 0.0, 0.0],
+                                        np.eye(3) * 0.01, 0.0)
+    assert localization.x.tolist() == [0.0, 0.0, 0.0, 1.0]
+    assert localization.P[3, 3] == pytest.approx(0.05 ** 2)
+    with pytest.raises(ValueError, match="fixed at the start"):
+        localization.model = model()

@@ -13,6 +13,8 @@ step is below ``ITERATION_STEP``: a Gauss-Newton search of the posterior's mode.
 pass is the plain EKF. It matters after a long time unobserved, when the heading is
 tens of degrees uncertain and a landmark's bearing, linearized there, would move the
 estimate along a tangent far from the arc the measurement allows.
+A state of four entries carries the range's scale as well (range_bearing.py): the
+motion leaves it as it is, and the observations' Jacobians have a column for it.
 Every function returns new values and leaves its inputs alone.
 """
 
@@ -28,7 +30,6 @@ from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, Senso
 from estimation_nodes.core.kalman.unicycle import UnicycleNoise, wrap
 from estimation_nodes.core.validation import FloatArray
 
-IDENTITY = np.eye(3)
 #: The iterated EKF stops when no state component moves more than this (m or rad): a
 #: micrometre, a microradian, far below what a sensor resolves.
 ITERATION_STEP = 1e-6
@@ -63,6 +64,8 @@ def predict(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
     A robot's odometry comes at 50 to 100 Hz, and numpy's 3 x 3 products cost more
     in their calls than in their arithmetic: F is the identity but for its last
     column (a, b, 1), so each entry of P' is a few products of floats."""
+    if len(x) > 3:
+        return _predict_with_scale(x, P, v, w, dt, noise)
     v, w, dt = unicycle.check_motion(v, w, dt)
     d, phi = v * dt, w * dt
     heading = x[2] + 0.5 * phi
@@ -88,14 +91,33 @@ def predict(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
     return moved, np.array([[q00, q01, q02], [q01, q11, q12], [q02, q12, q22]])
 
 
+def _predict_with_scale(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
+                        noise: UnicycleNoise) -> tuple[FloatArray, FloatArray]:
+    """``predict`` of a state with the range's scale: the pose block as above, the scale
+    unchanged, and its covariance with the pose carried by F (its last column)."""
+    pose, pose_P = predict(x[:3], P[:3, :3], v, w, dt, noise)
+    d, phi = v * dt, w * dt
+    heading = x[2] + 0.5 * phi
+    a, b = -d * math.sin(heading), d * math.cos(heading)
+    c0, c1, c2, scale_var = P[:, 3].tolist()
+    c0, c1 = c0 + a * c2, c1 + b * c2
+    (q00, q01, q02), (_, q11, q12), (_, _, q22) = pose_P.tolist()
+    return (np.array([*pose.tolist(), x[3]]),
+            np.array([[q00, q01, q02, c0], [q01, q11, q12, c1], [q02, q12, q22, c2],
+                      [c0, c1, c2, scale_var]]))
+
+
 def predict_by_matrices(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
                         noise: UnicycleNoise) -> tuple[FloatArray, FloatArray]:
     """``predict`` as the matrix products it writes out (the tests hold them equal)."""
     v, w, dt = unicycle.check_motion(v, w, dt)
-    F, G = unicycle.jacobians(x, v, w, dt)
+    F3, G3 = unicycle.jacobians(x, v, w, dt)
+    n = len(x)
+    F, G = np.eye(n), np.zeros((n, 2))          # the scale, if any, does not move
+    F[:3, :3], G[:3] = F3, G3
     var_d, var_phi = noise.variances(v * dt, w * dt, dt)
     P_next = F @ P @ F.T + (G * np.array([var_d, var_phi])) @ G.T
-    return unicycle.move(x, v, w, dt), _symmetric(P_next)
+    return np.append(unicycle.move(x, v, w, dt), x[3:]), _symmetric(P_next)
 
 
 def innovation(x: FloatArray, P: FloatArray, z: FloatArray, landmark: tuple[float, float],
@@ -114,7 +136,7 @@ def correct(x: FloatArray, P: FloatArray, observed: Innovation,
     """The observation applied, with the Joseph form of the covariance update."""
     assert observed.H is not None, "an EKF correction needs the EKF's innovation"
     K = gain(observed)
-    I_KH = IDENTITY - K @ observed.H
+    I_KH = np.eye(len(x)) - K @ observed.H
     return shifted(x, K, observed.y), _symmetric(I_KH @ P @ I_KH.T + K @ R @ K.T)
 
 

@@ -22,6 +22,14 @@ Odometry that reports commanded speeds, not measured ones, meets two facts of th
 robot it drives: the robot follows a command ``odometry_delay`` seconds after it is
 stamped, and at ``odometry_scale`` (forward, turn) times the commanded speeds. Both
 default to the identity (delay 0, scale 1) of measured odometry.
+
+A camera's range scale is rarely known to better than a few percent, and an error
+in it is the same at every frame: a bias the filter, taking frames as independent,
+averages into a confident wrong pose. With ``range_scale_std`` > 0 the scale is
+estimated with the pose, a fourth state whose prior is ``range_scale`` with that
+std: landmarks at different ranges and bearings disagree on a wrong scale, so the
+observations tell it from the pose. ``pose`` and ``pose_covariance`` are the pose's
+part of the state either way.
 """
 
 from __future__ import annotations
@@ -77,6 +85,14 @@ class LandmarkModel:
     odometry_delay: float = 0.0
     #: (forward, turn): the speeds the robot drives per unit of reported speed.
     odometry_scale: tuple[float, float] = (1.0, 1.0)
+    #: The std of the prior on the range's scale (mean ranging.scale); 0: the scale is
+    #: ranging.scale, not estimated.
+    range_scale_std: float = 0.0
+
+    @property
+    def state_size(self) -> int:
+        """3 (x, y, heading), or 4 with the range's scale estimated."""
+        return 4 if self.range_scale_std > 0 else 3
 
     def __post_init__(self) -> None:
         if self.kind not in FILTERS:
@@ -110,6 +126,12 @@ class LandmarkModel:
                 math.isfinite(v) and 0 < v <= 10 for v in self.odometry_scale):
             raise ValueError(f"odometry_scale: expected [forward, turn] in (0, 10], got "
                              f"{list(self.odometry_scale)}")
+        if not (math.isfinite(self.range_scale_std) and 0 <= self.range_scale_std <= 1):
+            raise ValueError(f"range_scale_std: expected 0 <= std <= 1, got "
+                             f"{self.range_scale_std!r}")
+        if self.points is not None and self.points.n != self.state_size:
+            raise ValueError(f"points: sigma points for a state of {self.points.n}, but the "
+                             f"state has {self.state_size}")
         for key, (lx, ly) in self.landmarks.items():
             if not (math.isfinite(lx) and math.isfinite(ly)):
                 raise ValueError(f"landmarks: landmark {key} at ({lx}, {ly}) is not finite")
@@ -152,10 +174,15 @@ class LandmarkLocalization:
         """Start at pose ``x0`` with covariance ``P0``, at time ``t0``; with ``t0`` None the
         filter starts at its first event's time, whatever event that is."""
         self.model = model
-        self.x = as_finite_array("initial_pose", x0, ndim=1)
-        if self.x.size != 3:
-            raise ValueError(f"initial_pose: expected [x, y, yaw], got {self.x.tolist()}")
-        self.P = check_covariance("initial_covariance", P0, 3)
+        pose = as_finite_array("initial_pose", x0, ndim=1)
+        if pose.size != 3:
+            raise ValueError(f"initial_pose: expected [x, y, yaw], got {pose.tolist()}")
+        pose_P = check_covariance("initial_covariance", P0, 3)
+        self.x, self.P = pose, pose_P
+        if model.state_size == 4:
+            self.x = np.append(pose, model.ranging.scale)
+            self.P = np.zeros((4, 4))
+            self.P[:3, :3], self.P[3, 3] = pose_P, model.range_scale_std ** 2
         self.t = None if t0 is None else float(t0)
         self.twist = (0.0, 0.0)
         #: Twists stamped but not yet driven (odometry_delay): (time driven from, twist).
@@ -170,9 +197,31 @@ class LandmarkLocalization:
 
     @model.setter
     def model(self, model: LandmarkModel) -> None:
-        """A new model (a node's parameters changed) is taken whole, its gate included."""
+        """A new model (a node's parameters changed) is taken whole, its gate included;
+        the state's size is the first model's (range_scale_std is fixed at the start)."""
+        previous: LandmarkModel | None = getattr(self, "_model", None)
+        if previous is not None and model.state_size != previous.state_size:
+            raise ValueError("range_scale_std: whether the scale is estimated is fixed at "
+                             "the start")
         self._model = model
         self._gate = model.gate
+
+    @property
+    def pose(self) -> FloatArray:
+        """(x, y, heading): the pose's part of the state."""
+        return self.x[:3]
+
+    @property
+    def pose_covariance(self) -> FloatArray:
+        """The pose's 3 x 3 block of the covariance."""
+        return self.P[:3, :3]
+
+    @property
+    def range_scale(self) -> tuple[float, float]:
+        """The range's scale and its std (0 where it is not estimated)."""
+        if len(self.x) > 3:
+            return float(self.x[3]), math.sqrt(max(float(self.P[3, 3]), 0.0))
+        return self.model.ranging.scale, 0.0
 
     # --- state, as causal_order.py saves and restores it ---------------------------------
 
@@ -302,7 +351,9 @@ class LandmarkLocalization:
         """The covariance grown by recovery_std in position and heading: at each recovery
         the gate opens further, until the observations fit again."""
         position, heading = self.model.recovery_std
-        self.P = self.P + np.diag([position ** 2, position ** 2, heading ** 2])
+        widening = np.zeros(len(self.x))
+        widening[:3] = position ** 2, position ** 2, heading ** 2
+        self.P = self.P + np.diag(widening)
         self.counts["recoveries"] += 1
         # Each widening gets its recovery_time for the observations to pass.
         self._last_used = self.t

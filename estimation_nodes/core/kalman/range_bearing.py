@@ -14,6 +14,10 @@ report not that range but the landmark's depth: its distance along the camera's
 axis, range cos(bearing) (``Ranging("depth")``; the UTIAS MRCLAM cameras do, see
 bench/utias_calibration.py). Either may carry a scale (an uncalibrated lens or
 target size): the reported value is ``scale`` times the true one.
+
+That scale may also be estimated with the pose, as a fourth state: x = (x, y, theta,
+scale). A state of four entries is read so, and ``ranging.scale`` is then only its
+prior's mean (landmarks.py).
 """
 
 from __future__ import annotations
@@ -78,22 +82,31 @@ def _offsets(x: FloatArray, landmark: tuple[float, float],
     return landmark[0] - px, landmark[1] - py, dpx, dpy
 
 
+def range_scale(x: FloatArray, ranging: Ranging) -> float:
+    """The range's scale: the state's fourth entry where it has one, else the model's."""
+    return float(x[3]) if len(x) > 3 else ranging.scale
+
+
 def expected(x: FloatArray, landmark: tuple[float, float], sensor: SensorPose,
              ranging: Ranging = EUCLIDEAN) -> FloatArray:
-    """(range, bearing) of ``landmark`` from pose ``x``."""
+    """(range, bearing) of ``landmark`` from pose ``x`` (and scale, see range_scale)."""
     dx, dy, _, _ = _offsets(x, landmark, sensor)
     axis = x[2] + sensor.yaw
+    return np.array([range_scale(x, ranging) * _distance(dx, dy, axis, ranging),
+                     wrap(math.atan2(dy, dx) - axis)])
+
+
+def _distance(dx: float, dy: float, axis: float, ranging: Ranging) -> float:
+    """What the range measures before its scale: the distance, or the depth on ``axis``."""
     if ranging.kind == "depth":
-        distance = dx * math.cos(axis) + dy * math.sin(axis)
-    else:
-        distance = math.hypot(dx, dy)
-    return np.array([ranging.scale * distance, wrap(math.atan2(dy, dx) - axis)])
+        return dx * math.cos(axis) + dy * math.sin(axis)
+    return math.hypot(dx, dy)
 
 
 def jacobian(x: FloatArray, landmark: tuple[float, float], sensor: SensorPose,
              ranging: Ranging = EUCLIDEAN) -> FloatArray:
-    """d (range, bearing) / d (x, y, theta), 2 x 3; ValueError where the landmark sits on
-    the sensor (no bearing)."""
+    """d (range, bearing) / d (x, y, theta), 2 x 3 (2 x 4 with d / d scale for a state of
+    four); ValueError where the landmark sits on the sensor (no bearing)."""
     dx, dy, dpx, dpy = _offsets(x, landmark, sensor)
     q = dx * dx + dy * dy
     r = math.sqrt(q)
@@ -105,10 +118,13 @@ def jacobian(x: FloatArray, landmark: tuple[float, float], sensor: SensorPose,
         distance_row = [-c, -s, -dpx * c - dpy * s - dx * s + dy * c]
     else:
         distance_row = [-dx / r, -dy / r, -(dx * dpx + dy * dpy) / r]
-    return np.array([
-        [ranging.scale * d for d in distance_row],
-        [dy / q, -dx / q, (dy * dpx - dx * dpy) / q - 1.0],
-    ])
+    scale = range_scale(x, ranging)
+    rows = [[scale * d for d in distance_row],
+            [dy / q, -dx / q, (dy * dpx - dx * dpy) / q - 1.0]]
+    if len(x) > 3:
+        rows[0].append(_distance(dx, dy, x[2] + sensor.yaw, ranging))
+        rows[1].append(0.0)
+    return np.array(rows)
 
 
 def residual(z: FloatArray, predicted: FloatArray) -> FloatArray:

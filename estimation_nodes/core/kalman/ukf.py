@@ -8,7 +8,9 @@ additive, P' = sum Wc (X - x')(X - x')' + G M G', and a correction is the standa
 x' = x + K y, P' = P - K S K' with K = Pxz S^-1 (the Joseph form has no UKF
 counterpart). Sigma points are drawn anew from (x, P) before every step, so several
 observations of one camera frame are applied one after the other, each from the
-estimate the last one left.
+estimate the last one left. A state of four carries the range's scale too
+(range_bearing.py): its sigma points are drawn in four dimensions, and the motion
+leaves the scale as it is.
 """
 
 from __future__ import annotations
@@ -25,23 +27,28 @@ from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, Senso
 from estimation_nodes.core.kalman.unicycle import TWO_PI, UnicycleNoise
 from estimation_nodes.core.validation import FloatArray
 
-STATE_SIZE = 3
+#: The states the sigma points may span: the pose, or the pose and the range's scale.
+STATE_SIZES = (3, 4)
 
 
 @dataclass(frozen=True)
 class SigmaPoints:
-    """Van der Merwe's scaled sigma points for a state of 3: spread ``alpha`` (0 < alpha
-    <= 1), ``beta`` (2 is optimal for a Gaussian), ``kappa`` (usually 0, or 3 - n)."""
+    """Van der Merwe's scaled sigma points for a state of ``n`` (3 or 4): spread ``alpha``
+    (0 < alpha <= 1), ``beta`` (2 is optimal for a Gaussian), ``kappa`` (usually 0, or
+    3 - n)."""
 
     alpha: float
     beta: float
     kappa: float
+    n: int = 3
     Wm: FloatArray = field(init=False, repr=False, compare=False)
     Wc: FloatArray = field(init=False, repr=False, compare=False)
     scale: float = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        n = STATE_SIZE
+        n = self.n
+        if n not in STATE_SIZES:
+            raise ValueError(f"n: expected a state size in {STATE_SIZES}, got {n!r}")
         if not (math.isfinite(self.alpha) and 0 < self.alpha <= 1):
             raise ValueError(f"alpha: expected 0 < alpha <= 1, got {self.alpha!r}")
         if not math.isfinite(self.beta):
@@ -78,12 +85,13 @@ def _differences(points: FloatArray, mean: FloatArray, angle: int) -> FloatArray
 
 
 def _moved(points: FloatArray, v: float, w: float, dt: float) -> FloatArray:
-    """unicycle.move for every sigma point at once."""
+    """unicycle.move for every sigma point at once (a scale, if any, left as it is)."""
     d, phi = v * dt, w * dt
     heading = points[:, 2] + 0.5 * phi
     return np.column_stack([points[:, 0] + d * np.cos(heading),
                             points[:, 1] + d * np.sin(heading),
-                            (points[:, 2] + phi + math.pi) % TWO_PI - math.pi])
+                            (points[:, 2] + phi + math.pi) % TWO_PI - math.pi,
+                            points[:, 3:]])
 
 
 COMPILED = "estimation_nodes.core.kalman.compiled"
@@ -106,7 +114,7 @@ def predict(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
     kernels = load_kernels(COMPILED) if compiled else None
     if kernels is not None:
         var_d, var_phi = noise.variances(v * dt, w * dt, dt)
-        x_next, P_next = np.empty(3), np.empty((3, 3))
+        x_next, P_next = np.empty(len(x)), np.empty((len(x), len(x)))
         if kernels.unscented_predict(x, P, v * dt, w * dt, points.scale, points.Wm,
                                      points.Wc, var_d, var_phi, x_next, P_next):
             return x_next, P_next
@@ -122,7 +130,8 @@ def predict_numpy(x: FloatArray, P: FloatArray, v: float, w: float, dt: float,
     moved = _moved(points.draw(x, P), v, w, dt)
     x_next = points.mean(moved, angle=2)
     deltas = _differences(moved, x_next, angle=2)
-    P_next = (deltas.T * points.Wc) @ deltas + unicycle.process_noise(x, v, w, dt, noise)
+    P_next = (deltas.T * points.Wc) @ deltas
+    P_next[:3, :3] += unicycle.process_noise(x, v, w, dt, noise)
     return x_next, _symmetric(P_next)
 
 
