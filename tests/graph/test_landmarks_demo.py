@@ -1,5 +1,5 @@
 """estimation_demo --scenario landmarks --plot: the track among the landmarks, drawn from the
-run's recording, and the same picture from estimation_plot."""
+run's recording, the same picture from estimation_plot, and the recording replayed EQUAL."""
 
 import subprocess
 
@@ -33,6 +33,11 @@ def test_the_landmarks_demo_draws_its_track(ros_env, tmp_path):
     by_topic = {summary.channels[i].topic: n
                 for i, n in summary.statistics.channel_message_counts.items()}
     assert by_topic["/pose"] > 0 and by_topic["/true_pose"] > 0, by_topic
+    # The filter offline over the recorded odometry and frames publishes the same poses.
+    replay = subprocess.run([executable("estimation_replay"), str(recording)], env=ros_env,
+                            capture_output=True, text=True, timeout=120)
+    assert replay.returncode == 0, replay.stdout + replay.stderr
+    assert "online vs offline to 1e-09: EQUAL" in replay.stdout, replay.stdout
     again = tmp_path / "again.png"
     plot = subprocess.run([executable("estimation_plot"), str(recording), "-o", str(again)],
                           env=ros_env, capture_output=True, text=True, timeout=120)

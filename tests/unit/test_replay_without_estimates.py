@@ -1,5 +1,5 @@
-"""estimation_replay over a recording with none of the estimator's outputs (a landmarks
-run, an imported log) says there is nothing to compare instead of EQUAL."""
+"""estimation_replay over a recording with none of the outputs it compares (a landmarks run
+without a pose, an imported log) says there is nothing to compare instead of EQUAL."""
 
 import pytest
 

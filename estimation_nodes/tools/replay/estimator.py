@@ -233,6 +233,8 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(argv)
     if args.recording.is_file() and _is_grid(args.recording):
         sys.exit(_main_grid(args))
+    if args.recording.is_file() and _is_landmarks(args.recording):
+        sys.exit(_main_landmarks(args))
     try:
         recording = read_recording(args.recording)
         if args.params_file:
@@ -244,11 +246,11 @@ def main(argv: list[str] | None = None) -> None:
         print(f"estimation_replay: {error}", file=sys.stderr)
         sys.exit(2)
     if not any(comparison.compared.values()):
-        # A landmarks run or an imported log has none of the estimator's outputs:
-        # nothing compared must not read as EQUAL.
+        # An imported log has none of the estimator's outputs: nothing compared must
+        # not read as EQUAL.
         print(f"estimation_replay: {args.recording}: no estimate of the estimator or the "
-              f"grid localizer in it, nothing to compare (a landmarks run or an imported "
-              f"log is not replayed yet)", file=sys.stderr)
+              f"grid localizer in it, nothing to compare (an imported log has only the "
+              f"sensors' messages)", file=sys.stderr)
         sys.exit(2)
     for topic, count in sorted(recording.counts.items()):
         print(f"  {topic}: {plural(count, 'message')}")
@@ -274,36 +276,81 @@ def _is_grid(path: Path) -> bool:
         return False
 
 
+def _is_landmarks(path: Path) -> bool:
+    from estimation_nodes.tools.replay.landmarks import is_landmark_recording
+
+    try:
+        return is_landmark_recording(path)
+    except Exception:               # not MCAP at all: read_recording says so in one line
+        return False
+
+
+def _replayed(replay_function, args: argparse.Namespace):
+    """``replay_function(recording, parameters or None, tolerance)``, or None after one line
+    on stderr where the recording or the parameters cannot be used."""
+    try:
+        parameters_yaml = check_params_file(args.params_file).read_text(encoding="utf-8") \
+            if args.params_file else None
+        return replay_function(args.recording, parameters_yaml, args.tolerance)
+    except (RecordingError, ValueError) as error:
+        print(f"estimation_replay: {error}", file=sys.stderr)
+        return None
+
+
+def _verdict(comparison, compared: str, notes: list[str], tolerance: float) -> int:
+    """Print what was compared, the notes, the differences and the verdict; the exit code."""
+    print(f"pose: {compared}, largest differences "
+          + ", ".join(f"{k} {v:.3g}" for k, v in comparison.worst.items()))
+    for line in notes + comparison.differences[:20]:
+        print(line)
+    verdict = "EQUAL" if comparison.equal else f"DIFFERENT ({len(comparison.differences)})"
+    print(f"online vs offline to {tolerance:g}: {verdict}")
+    return 0 if comparison.equal else 1
+
+
+def _main_landmarks(args: argparse.Namespace) -> int:
+    """ekf_localizer's replay (tools/replay/landmarks.py); its exit code."""
+    from estimation_nodes.tools.replay.landmarks import replay_landmarks
+
+    comparison = _replayed(replay_landmarks, args)
+    if comparison is None:
+        return 2
+    if not comparison.compared:
+        print(f"estimation_replay: {args.recording}: no pose of ekf_localizer in it, "
+              f"nothing to compare", file=sys.stderr)
+        return 2
+    notes = []
+    if comparison.provisional:
+        notes.append(f"  {plural(comparison.provisional, 'pose')} provisional (published "
+                     f"again, or before a late event), not compared")
+    if comparison.dropped:
+        notes.append(f"  {plural(comparison.dropped, 'input')} the localizer drops (not "
+                     f"finite, unstamped or malformed)")
+    return _verdict(comparison, f"{comparison.compared} estimates compared", notes,
+                    args.tolerance)
+
+
 def _main_grid(args: argparse.Namespace) -> int:
     """The grid localizer's replay (tools/replay/grid_localizer.py); its exit code."""
     from estimation_nodes.tools.replay.grid_localizer import replay_grid
 
-    try:
-        parameters_yaml = check_params_file(args.params_file).read_text(encoding="utf-8") \
-            if args.params_file else None
-        comparison = replay_grid(args.recording, parameters_yaml, args.tolerance)
-    except (RecordingError, ValueError) as error:
-        print(f"estimation_replay: {error}", file=sys.stderr)
+    comparison = _replayed(replay_grid, args)
+    if comparison is None:
         return 2
-    print(f"pose: {comparison.compared} updates compared, largest differences "
-          + ", ".join(f"{k} {v:.3g}" for k, v in comparison.worst.items()))
+    notes = []
     others = ", ".join(plural(n, kind) for kind, n in sorted(comparison.others.items()) if n)
     if others:
-        print(f"  also compared: {others} (uniform belief or initial pose)")
+        notes.append(f"  also compared: {others} (uniform belief or initial pose)")
     if comparison.assumed:
-        print(f"  the recording starts after the localizer's first outputs: it was taken to "
-              f"have made {plural(comparison.assumed, 'update')} before them by its rule, "
-              f"with the recorded scans")
+        notes.append(f"  the recording starts after the localizer's first outputs: it was "
+                     f"taken to have made {plural(comparison.assumed, 'update')} before them "
+                     f"by its rule, with the recorded scans")
     if comparison.left_out:
-        print(f"  {plural(comparison.left_out, 'scan')} its update rule takes the localizer "
-              f"left out (superseded, late odometry, or no time); the replay took the scans "
-              f"it took")
-    for line in comparison.differences[:20]:
-        print(line)
-    verdict = "EQUAL" if comparison.equal else f"DIFFERENT ({len(comparison.differences)})"
-    print(f"online vs offline to {args.tolerance:g}: {verdict}")
-    return 0 if comparison.equal else 1
-
+        notes.append(f"  {plural(comparison.left_out, 'scan')} its update rule takes the "
+                     f"localizer left out (superseded, late odometry, or no time); the replay "
+                     f"took the scans it took")
+    return _verdict(comparison, f"{comparison.compared} updates compared", notes,
+                    args.tolerance)
 
 if __name__ == "__main__":
     main()
