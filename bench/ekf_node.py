@@ -2,6 +2,7 @@
 and its event -> pose latency at a camera's and an odometry's rates.
 
     python bench/ekf_node.py run [--robot 1] [--filter ekf|ukf] [--rate 1] [--seconds S]
+        [--record FILE.mcap]
     python bench/ekf_node.py latency [--filter ekf|ukf] [--seconds 30]
 
 ``run``: what a user does with the dataset, through the real executables.
@@ -11,7 +12,9 @@ and its event -> pose latency at a camera's and an odometry's rates.
 plays ``/odom`` and ``/landmark_observations`` into it at ``--rate`` times real time.
 Printed: the published poses scored against Vicon as bench/ekf_real.py scores the
 core's, and the largest difference from the core filter run offline on the same
-events, their observations read as the node reads them (float32 coordinates).
+events, their observations read as the node reads them (float32 coordinates). With
+``--record`` the run is also recorded (the odometry and frames the node heard, its poses,
+its parameters) and ``estimation_replay`` checks the poses against the filter offline.
 
 ``latency``: a publisher in this process sends odometry at 100 Hz and camera frames
 at 30 Hz (a simulated unicycle among the UTIAS landmarks) to ekf_localizer with the
@@ -39,9 +42,11 @@ sys.path.insert(0, str(BENCH))
 from ekf_real import DATASET, PARAMS, file_figures, run_filter, score  # noqa: E402
 from real_log_node import end_run, executable, wait_for_line  # noqa: E402
 from ros_env import confine_ros  # noqa: E402
+from run_recorder import RunRecorder  # noqa: E402
 from timing import table  # noqa: E402
 
 from estimation_nodes.params.landmarks import landmark_model  # noqa: E402
+from estimation_nodes.nodes.qos import latched_qos  # noqa: E402
 from estimation_nodes.params.specs import LANDMARK_MODEL_SPECS, spec_defaults  # noqa: E402
 from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
 from estimation_nodes.tools.importers.cli import _ns  # noqa: E402
@@ -123,10 +128,18 @@ def run_robot(args: argparse.Namespace, work: Path) -> None:
     initial = np.array([np.interp(first_odometry, run.truth[:, 0], run.truth[:, i])
                         for i in (1, 2)] + [_heading_at(run, first_odometry)])
     env = confine_ros(88)
-    localizer = start_localizer(work, args.filter, initial,
-                                recording.with_suffix(".landmarks.yaml"), env)
+    landmarks_file = recording.with_suffix(".landmarks.yaml")
+    parameters_yaml = localizer_parameters(args.filter, initial, landmarks_file)
+    (work / "localizer.yaml").write_text(parameters_yaml)
+    localizer = start_localizer(work, args.filter, initial, landmarks_file, env,
+                                params=work / "localizer.yaml")
     rclpy.init()
     watcher = PoseWatcher()
+    recorder = RunRecorder(watcher.node, {
+        "/odom": ("nav_msgs/msg/Odometry", 1000),
+        "/landmark_observations": ("sensor_msgs/msg/PointCloud2", 1000),
+        "/pose": ("geometry_msgs/msg/PoseWithCovarianceStamped", latched_qos(1000))}) \
+        if args.record else None
     play = None
     try:
         play = subprocess.Popen(
@@ -142,7 +155,26 @@ def run_robot(args: argparse.Namespace, work: Path) -> None:
         watcher.spin(lambda: False, 3.0)
     finally:
         end_run(play, localizer, watcher.node)
-    report_robot(args, run, initial, watcher)
+    rows = report_robot(args, run, initial, watcher)
+    if recorder is not None:
+        rows += recorder.write_and_replay(
+            args.record, {"parameters_yaml": parameters_yaml, "kind": "landmarks"},
+            executable("estimation_replay"))
+    print(f"ekf_localizer ({args.filter.upper()}) on robot {args.robot}, played at "
+          f"{args.rate:g}x, through DDS")
+    print(table(["figure", "value"], rows))
+
+
+def localizer_parameters(kind: str, initial: np.ndarray, landmarks_file: Path) -> str:
+    """The robots' file with this run's filter, start and landmarks, as YAML: given to the
+    node and kept in a recording."""
+    import yaml
+
+    document = yaml.safe_load(PARAMS.read_text(encoding="utf-8"))
+    section = document["/**/ekf_localizer"]["ros__parameters"]
+    section.update(filter=kind, landmarks_file=str(landmarks_file),
+                   initial_pose=[float(v) for v in initial])
+    return yaml.safe_dump(document)
 
 
 def _heading_at(run, t: float) -> float:
@@ -150,7 +182,7 @@ def _heading_at(run, t: float) -> float:
     return math.remainder(float(np.interp(t, run.truth[:, 0], heading)), 2 * math.pi)
 
 
-def report_robot(args, run, initial: np.ndarray, watcher: PoseWatcher) -> None:
+def report_robot(args, run, initial: np.ndarray, watcher: PoseWatcher) -> list[list[str]]:
     stamps = sorted(watcher.poses)
     if not stamps:
         sys.exit("ekf_node: no pose was published")
@@ -178,9 +210,7 @@ def report_robot(args, run, initial: np.ndarray, watcher: PoseWatcher) -> None:
             ["longest > 0.5 m", f"{node['longest_off_s']:.1f} s"],
             ["largest difference from the core", f"{difference.max():.2e} m"],
             ["the node's counts", watcher.counts()]]
-    print(f"ekf_localizer ({args.filter.upper()}) on robot {args.robot}, played at "
-          f"{args.rate:g}x, through DDS")
-    print(table(["figure", "value"], rows))
+    return rows
 
 
 def as_received(run):
@@ -283,6 +313,8 @@ def main() -> None:
     parser.add_argument("--filter", choices=("ekf", "ukf"), default="ekf")
     parser.add_argument("--rate", type=float, default=1.0,
                         help="play at this many times real time (run)")
+    parser.add_argument("--record", type=Path, metavar="FILE.mcap",
+                        help="run: record it and check it with estimation_replay")
     parser.add_argument("--seconds", type=float, default=0.0,
                         help="run: play only this long; latency: default 30")
     args = parser.parse_args()

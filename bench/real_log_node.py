@@ -48,6 +48,7 @@ from real_buildings import (  # noqa: E402
     RANGE_MAX,
 )
 from ros_env import confine_ros  # noqa: E402
+from run_recorder import RunRecorder  # noqa: E402
 from timing import table  # noqa: E402
 
 from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
@@ -99,31 +100,21 @@ class Watcher:
                                                   10)
         self.executor = SingleThreadedExecutor()
         self.executor.add_node(self.node)
-        #: (topic, raw message, publish time in ns) of everything recorded, in arrival order.
-        self.recorded: list[tuple[str, bytes, int]] = []
+        self.recorder: RunRecorder | None = None
 
     def record(self) -> None:
-        """Keep every input the localizer hears and every pose and quality it publishes,
-        raw, with their publish (source) times, as the demo's recorder does."""
-        from geometry_msgs.msg import PoseWithCovarianceStamped
-        from nav_msgs.msg import Odometry
+        """Keep every input the localizer hears and every pose and quality it publishes."""
         from rclpy.qos import QoSProfile, ReliabilityPolicy
-        from sensor_msgs.msg import LaserScan
-        from std_msgs.msg import Float64
 
         from estimation_nodes.nodes.qos import latched_qos
 
         best_effort = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
-        for topic, (kind, qos) in {"/scan": (LaserScan, best_effort), "/odom": (Odometry, 1000),
-                                   "/pose": (PoseWithCovarianceStamped, latched_qos(1000)),
-                                   "/localization_quality": (Float64, latched_qos(1000)),
-                                   }.items():
-            self.node.create_subscription(kind, topic, self._keep(topic), qos, raw=True)
-
-    def _keep(self, topic: str):
-        def keep(data: bytes, info) -> None:
-            self.recorded.append((topic, data, info["source_timestamp"]))
-        return keep
+        pose_type = "geometry_msgs/msg/PoseWithCovarianceStamped"
+        self.recorder = RunRecorder(self.node, {
+            "/scan": ("sensor_msgs/msg/LaserScan", best_effort),
+            "/odom": ("nav_msgs/msg/Odometry", 1000),
+            "/pose": (pose_type, latched_qos(1000)),
+            "/localization_quality": ("std_msgs/msg/Float64", latched_qos(1000))})
 
     def _on_pose(self, msg) -> None:
         from estimation_nodes.nodes.grid_messages import planar_pose
@@ -148,8 +139,9 @@ class Watcher:
         covariance[5, 5] = PRIOR_SIGMA_RAD ** 2
         msg.pose.covariance = covariance.ravel().tolist()
         self.initial.publish(msg)
-        from rclpy.serialization import serialize_message
-        self.recorded.append(("/initialpose", serialize_message(msg), time.time_ns()))
+        if self.recorder is not None:
+            self.recorder.sent("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped",
+                               msg)
 
     def spin(self, condition, timeout: float) -> bool:
         return spin_until(self.executor, condition, timeout)
@@ -201,8 +193,10 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
     if args.picture:
         draw(log, watcher, map_yaml, args.picture, log_path.name)
     rows = summary(log, watcher, rate, played_s, peak)
-    if args.record:
-        rows += record_and_replay(watcher, parameters_yaml, args.record)
+    if watcher.recorder is not None:
+        rows += watcher.recorder.write_and_replay(
+            args.record, {"parameters_yaml": parameters_yaml, "kind": "grid"},
+            executable("estimation_replay"))
     return rows
 
 
@@ -215,28 +209,6 @@ def localizer_parameters(args: argparse.Namespace, map_yaml: Path) -> str:
         "heading_bins": args.heading_bins, "max_states": 200_000_000,
         "laser_max_range": RANGE_MAX, "diagnostics_period": 0.5,
         "max_odom_jump": args.max_odom_jump}}})
-
-
-def record_and_replay(watcher: Watcher, parameters_yaml: str, path: Path) -> list[list[str]]:
-    """Write what the watcher recorded to ``path`` and run estimation_replay on it."""
-    from estimation_nodes.tools.recording.mcap import McapRunWriter
-
-    types = {"/scan": "sensor_msgs/msg/LaserScan", "/odom": "nav_msgs/msg/Odometry",
-             "/initialpose": "geometry_msgs/msg/PoseWithCovarianceStamped",
-             "/pose": "geometry_msgs/msg/PoseWithCovarianceStamped",
-             "/localization_quality": "std_msgs/msg/Float64"}
-    writer = McapRunWriter(path, types, {"parameters_yaml": parameters_yaml, "kind": "grid"})
-    for topic, data, published_ns in watcher.recorded:
-        writer.write(topic, data, published_ns, published_ns)
-    writer.close()
-    started = time.monotonic()
-    replay = subprocess.run([executable("estimation_replay"), str(path)],
-                            capture_output=True, text=True)
-    print(replay.stdout + replay.stderr)
-    verdict = (replay.stdout.strip().splitlines() or ["(no output)"])[-1]
-    return [["recording", f"{path} ({len(watcher.recorded)} messages)"],
-            ["estimation_replay", f"{verdict} (exit {replay.returncode}, "
-             f"{time.monotonic() - started:.0f} s)"]]
 
 
 def draw(log, watcher: Watcher, map_yaml: Path, output: Path, name: str) -> None:
