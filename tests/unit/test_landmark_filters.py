@@ -110,10 +110,10 @@ def dataset_events(robot: int, seconds: float):
     return events, run.landmarks, run.truth[0, 1:]
 
 
-def ours(kind, events, landmarks, x0, ranging=EUCLIDEAN):
-    points = ukf.SigmaPoints(0.5, 2.0, 0.0) if kind == "ukf" else None
+def ours(kind, events, landmarks, x0, ranging=EUCLIDEAN, scale_std=0.0):
+    points = ukf.SigmaPoints(0.5, 2.0, 0.0, n=4 if scale_std else 3) if kind == "ukf" else None
     model = LandmarkModel(kind, NOISE, 0.12, 0.0, 0.027, SENSOR, landmarks, 1.0, 5.0, (1.0, 0.5),
-                          points, ranging)
+                          points, ranging, range_scale_std=scale_std)
     localization = LandmarkLocalization(model, x0, np.diag([0.04, 0.04, 0.02]), 0.0)
     for t, kind_, data in events:
         if kind_ == "odom":
@@ -130,12 +130,30 @@ class NonlinearEKF(ExtendedKalmanFilter):
     dt = 0.0
 
     def predict_x(self, u=0):
-        self.x = unicycle.move(self.x, *self.twist, self.dt)
+        self.x = np.append(unicycle.move(self.x, *self.twist, self.dt), self.x[3:])
 
 
-def filterpy_nonlinear_ekf(events, landmarks, x0, ranging=EUCLIDEAN):
-    f = NonlinearEKF(dim_x=3, dim_z=2)
-    f.x, f.P, f.R = np.array(x0, float), np.diag([0.04, 0.04, 0.02]), R
+def start(x0, ranging, scale_std):
+    """The initial state and covariance: the pose, and with ``scale_std`` the range's scale
+    as a fourth state (its prior: the ranging's scale, that std)."""
+    x = np.array(x0, float)
+    P = np.diag([0.04, 0.04, 0.02])
+    if not scale_std:
+        return x, P
+    return np.append(x, ranging.scale), np.diag([0.04, 0.04, 0.02, scale_std ** 2])
+
+
+def padded(matrix, n):
+    """``matrix`` (the pose's block) in the top left of an n x n one, the rest zero."""
+    out = np.zeros((n, n))
+    out[:matrix.shape[0], :matrix.shape[1]] = matrix
+    return out
+
+
+def filterpy_nonlinear_ekf(events, landmarks, x0, ranging=EUCLIDEAN, scale_std=0.0):
+    n = 4 if scale_std else 3
+    f = NonlinearEKF(dim_x=n, dim_z=2)
+    (f.x, f.P), f.R = start(x0, ranging, scale_std), R
     time = 0.0
     for t, kind, data in events:
         dt = t - time
@@ -143,7 +161,8 @@ def filterpy_nonlinear_ekf(events, landmarks, x0, ranging=EUCLIDEAN):
             v, w = f.twist
             F, G = unicycle.jacobians(f.x, v, w, dt)
             var_d, var_phi = NOISE.variances(v * dt, w * dt, dt)
-            f.F, f.Q, f.dt = F, G @ np.diag([var_d, var_phi]) @ G.T, dt
+            F = padded(F, n) + np.diag([0.0] * 3 + [1.0] * (n - 3))  # the scale stays
+            f.F, f.Q, f.dt = F, padded(G @ np.diag([var_d, var_phi]) @ G.T, n), dt
             f.predict()
             time = t
         if kind == "odom":
@@ -166,24 +185,27 @@ def angle_mean(points, weights, angle):
     return mean
 
 
-def filterpy_ukf(events, landmarks, x0, ranging=EUCLIDEAN):
-    points = MerweScaledSigmaPoints(3, alpha=0.5, beta=2.0, kappa=0.0,
-                                    subtract=lambda a, b: np.r_[a[:2] - b[:2], wrap(a[2] - b[2])])
+def filterpy_ukf(events, landmarks, x0, ranging=EUCLIDEAN, scale_std=0.0):
+    n = 4 if scale_std else 3
+
+    def subtract(a, b):
+        return np.r_[a[:2] - b[:2], wrap(a[2] - b[2]), a[3:] - b[3:]]
+
+    points = MerweScaledSigmaPoints(n, alpha=0.5, beta=2.0, kappa=0.0, subtract=subtract)
     state = {"twist": (0.0, 0.0)}
     f = UnscentedKalmanFilter(
-        dim_x=3, dim_z=2, dt=0.0, points=points,
-        fx=lambda s, dt: unicycle.move(s, *state["twist"], dt),
+        dim_x=n, dim_z=2, dt=0.0, points=points,
+        fx=lambda s, dt: np.append(unicycle.move(s, *state["twist"], dt), s[3:]),
         hx=lambda s, lm: range_bearing.expected(s, lm, SENSOR, ranging),
         x_mean_fn=lambda p, wm: angle_mean(p, wm, 2),
         z_mean_fn=lambda p, wm: angle_mean(p, wm, 1),
-        residual_x=lambda a, b: np.r_[a[:2] - b[:2], wrap(a[2] - b[2])],
-        residual_z=range_bearing.residual)
-    f.x, f.P, f.R = np.array(x0, float), np.diag([0.04, 0.04, 0.02]), R
+        residual_x=subtract, residual_z=range_bearing.residual)
+    (f.x, f.P), f.R = start(x0, ranging, scale_std), R
     time = 0.0
     for t, kind, data in events:
         dt = t - time
         if dt > 0:
-            f.Q = unicycle.process_noise(f.x, *state["twist"], dt, NOISE)
+            f.Q = padded(unicycle.process_noise(f.x, *state["twist"], dt, NOISE), n)
             f.predict(dt=dt)
             time = t
         if kind == "odom":
@@ -216,15 +238,28 @@ def test_the_ukf_equals_filterpy_on_a_simulated_run(seed):
     np.testing.assert_allclose(P, fP, atol=1e-9)
 
 
-@pytest.mark.skipif(not DATASET.is_dir(), reason=f"the UTIAS dataset is not at {DATASET}")
-@pytest.mark.parametrize("ranging", [EUCLIDEAN, Ranging("depth", 1.035)],
-                         ids=["distance", "depth"])
 @pytest.mark.parametrize("kind", ["ekf", "ukf"])
-def test_both_filters_equal_filterpy_over_a_whole_real_run(kind, ranging):
-    events, landmarks, x0 = dataset_events(1, seconds=1e9)
-    x, P = ours(kind, events, landmarks, x0, ranging)
+def test_the_filters_with_the_scale_state_equal_filterpy_on_a_simulated_run(kind):
+    events = simulated_events(3)
+    ranging = Ranging("euclidean", 0.98)         # the model's prior; the camera is exact
+    x, P = ours(kind, events, LANDMARKS, (0.0, 0.0, 0.3), ranging, scale_std=0.05)
     reference = filterpy_nonlinear_ekf if kind == "ekf" else filterpy_ukf
-    fx, fP = reference(events, landmarks, x0, ranging)
+    fx, fP = reference(events, LANDMARKS, (0.0, 0.0, 0.3), ranging, scale_std=0.05)
+    assert x.size == 4
+    np.testing.assert_allclose(x, fx, atol=1e-9)
+    np.testing.assert_allclose(P, fP, atol=1e-9)
+
+
+@pytest.mark.skipif(not DATASET.is_dir(), reason=f"the UTIAS dataset is not at {DATASET}")
+@pytest.mark.parametrize("ranging, scale_std", [(EUCLIDEAN, 0.0), (Ranging("depth", 1.035), 0.0),
+                                                (Ranging("depth", 1.035), 0.015)],
+                         ids=["distance", "depth", "depth, scale estimated"])
+@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+def test_both_filters_equal_filterpy_over_a_whole_real_run(kind, ranging, scale_std):
+    events, landmarks, x0 = dataset_events(1, seconds=1e9)
+    x, P = ours(kind, events, landmarks, x0, ranging, scale_std)
+    reference = filterpy_nonlinear_ekf if kind == "ekf" else filterpy_ukf
+    fx, fP = reference(events, landmarks, x0, ranging, scale_std)
     np.testing.assert_allclose(x, fx, atol=1e-9)
     np.testing.assert_allclose(P, fP, atol=1e-9)
 
