@@ -9,7 +9,7 @@ import pytest
 
 BENCH = Path(__file__).resolve().parents[2] / "bench"
 #: Modules the scripts import, not scripts.
-HELPERS = ("timing.py", "ros_env.py", "relay_node.py", "amcl_baseline.py")
+HELPERS = ("timing.py", "ros_env.py", "relay_node.py", "amcl_baseline.py", "run_recorder.py")
 SCRIPTS = sorted(p for p in BENCH.glob("*.py") if p.name not in HELPERS)
 
 

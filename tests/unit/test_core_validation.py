@@ -13,6 +13,7 @@ every run checks the same cases.
 """
 
 import dataclasses
+import enum
 import math
 import re
 import sys
@@ -67,7 +68,7 @@ def finite(value) -> bool:
     """Whether every number in a result (arrays, tuples, dataclasses) is finite."""
     if isinstance(value, np.ndarray):
         return value.dtype.kind in "biu" or bool(np.isfinite(value).all())
-    if value is None or isinstance(value, (bool, int, str, np.integer, np.bool_)):
+    if value is None or isinstance(value, (bool, int, str, np.integer, np.bool_, enum.Enum)):
         return True
     if isinstance(value, (float, np.floating)):
         return math.isfinite(value)
