@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -129,6 +130,10 @@ def run_robot(args: argparse.Namespace, work: Path) -> None:
                         for i in (1, 2)] + [_heading_at(run, first_odometry)])
     env = confine_ros(88)
     landmarks_file = recording.with_suffix(".landmarks.yaml")
+    if args.record:
+        # beside the recording, for a replay of it later
+        landmarks_file = Path(shutil.copy(landmarks_file,
+                                          args.record.with_suffix(".landmarks.yaml")))
     parameters_yaml = localizer_parameters(args.filter, initial, landmarks_file)
     (work / "localizer.yaml").write_text(parameters_yaml)
     localizer = start_localizer(work, args.filter, initial, landmarks_file, env,

@@ -138,10 +138,11 @@ class Watcher:
         covariance[0, 0] = covariance[1, 1] = PRIOR_SIGMA_M ** 2
         covariance[5, 5] = PRIOR_SIGMA_RAD ** 2
         msg.pose.covariance = covariance.ravel().tolist()
+        sent_ns = time.time_ns()
         self.initial.publish(msg)
         if self.recorder is not None:
             self.recorder.sent("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped",
-                               msg)
+                               msg, sent_ns)
 
     def spin(self, condition, timeout: float) -> bool:
         return spin_until(self.executor, condition, timeout)
@@ -152,6 +153,8 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
 
     log = carmen.read_log(log_path)
     recording, map_yaml = prepare(log_path, work)
+    if args.record:
+        map_yaml = beside(args.record, map_yaml)
     period = float(np.median(np.diff([scan.t for scan in log.scans])))
     rate = period * args.scan_rate
     env = confine_ros(87)
@@ -198,6 +201,18 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
             args.record, {"parameters_yaml": parameters_yaml, "kind": "grid"},
             executable("estimation_replay"))
     return rows
+
+
+def beside(recording: Path, map_yaml: Path) -> Path:
+    """The map copied to a folder beside the recording (the node is given that copy): a
+    replay of the recording later finds the map it names."""
+    import shutil
+
+    folder = recording.parent / f"{recording.stem}_map"
+    folder.mkdir(parents=True, exist_ok=True)
+    for path in map_yaml.parent.glob(f"{map_yaml.stem}.*"):
+        shutil.copy(path, folder / path.name)
+    return folder / map_yaml.name
 
 
 def localizer_parameters(args: argparse.Namespace, map_yaml: Path) -> str:

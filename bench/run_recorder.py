@@ -28,16 +28,19 @@ class RunRecorder:
                                      raw=True)
 
     def _keep(self, topic: str):
+        from estimation_nodes.nodes.stamps import published_ns
+
         def keep(data: bytes, info) -> None:
-            self.recorded.append((topic, data, info["source_timestamp"]))
+            self.recorded.append((topic, data, published_ns(info)))
         return keep
 
-    def sent(self, topic: str, type_name: str, msg) -> None:
-        """A message the bench itself published (its own subscription would not hear it)."""
+    def sent(self, topic: str, type_name: str, msg, published_ns: int) -> None:
+        """A message the bench itself published at ``published_ns`` (taken just before the
+        publish call; its own subscription would not hear it)."""
         from rclpy.serialization import serialize_message
 
         self.types[topic] = type_name
-        self.recorded.append((topic, serialize_message(msg), time.time_ns()))
+        self.recorded.append((topic, serialize_message(msg), published_ns))
 
     def write_and_replay(self, path: Path, metadata: dict[str, str],
                          replay_executable: str) -> list[list[str]]:

@@ -156,8 +156,12 @@ class GridLocalizer(Node):
                          " not taken as motion; followed from the new pose")
             return
         if step is OdometryStep.REPEATED_STAMP:
-            self._reject("repeated_odom_stamp", "odom ignored: stamped as the one before it"
-                         " (the first pose at a time is kept)")
+            # Not a fault of the message: real logs repeat stamps (a driver polling faster
+            # than its clock ticks). Counted, and said once.
+            if not self.handled["odom_repeated_stamp"]:
+                self.get_logger().info("odom repeats a stamp: the first pose at a time is "
+                                       "kept, later ones ignored (handled.odom_repeated_stamp)")
+            self.handled["odom_repeated_stamp"] += 1
             return
         self.handled["odom"] += 1
         waiting = self._waiting_scan

@@ -381,8 +381,9 @@ LANDMARK_MODEL_SPECS = (
               "calibration; 1 for a calibrated sensor).", min_value=0.5, max_value=2.0),
     ParamSpec("range_scale_std", 0.0, "Estimate the range's scale with the pose, from a "
               "prior of range_scale with this std (a fourth state; 0: range_scale is taken "
-              "as exact). For a camera whose scale is known to a few percent only.",
-              read_only=True, min_value=0.0, max_value=1.0),
+              "as exact). For a camera whose scale is known to a few percent only; an "
+              "initialpose or ~/reset starts it again from that prior.",
+              read_only=True, min_value=0.0, max_value=0.25),
     ParamSpec("odometry_delay", 0.0, "Seconds between an odometry message's stamp and the "
               "robot driving its twist (0 for measured speeds; a robot that reports its "
               "commands follows them late).", read_only=True, min_value=0.0, max_value=10.0),

@@ -6,29 +6,59 @@ from __future__ import annotations
 from geometry_msgs.msg import PoseWithCovarianceStamped
 
 from estimation_nodes.tools.replay.grid_localizer import Recorded
-from estimation_nodes.tools.replay.landmarks import POSE, Event, LandmarkComparison, _final_poses
+from estimation_nodes.tools.replay.landmarks import (
+    POSE,
+    Event,
+    LandmarkComparison,
+    _before_too_late,
+    _final_poses,
+)
+
+SECOND = 10**9
 
 
 def pose(stamp_ns: int, publish_ns: int) -> Recorded:
     msg = PoseWithCovarianceStamped()
-    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, 10**9)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp_ns, SECOND)
     return Recorded(POSE, publish_ns, msg)
 
 
-def test_a_stamp_s_last_pose_is_compared_and_a_pose_before_a_late_event_is_not():
-    second = 10**9
-    events = [Event(1 * second, 0, 100, ("odom", 0.1, 0.0)),
-              Event(1 * second, 1, 110, ("frame", [])),
-              Event(2 * second, 0, 200, ("odom", 0.1, 0.0)),
-              Event(3 * second, 0, 300, ("odom", 0.1, 0.0)),
-              Event(second + second // 2, 1, 350, ("frame", []))]  # 1.5 s, late: after 3 s
-    poses = [pose(1 * second, 105), pose(1 * second, 115),       # odometry, then the frame
-             pose(2 * second, 205), pose(3 * second, 305),
-             pose(3 * second, 355)]                              # the late frame answered
+def odom(stamp_ns: int, publish_ns: int) -> Event:
+    return Event(stamp_ns, 0, publish_ns, ("odom", 0.1, 0.0))
+
+
+def frame(stamp_ns: int, publish_ns: int) -> Event:
+    return Event(stamp_ns, 1, publish_ns, ("frame", []))
+
+
+#: Odometry at 1 s, a frame of 1 s, odometry at 2 s, published in that order.
+EVENTS = [odom(SECOND, 100), frame(SECOND, 110), odom(2 * SECOND, 200)]
+
+
+def compared(poses) -> tuple[dict[int, int], int]:
     comparison = LandmarkComparison()
-    final = _final_poses(events, poses, comparison)
-    # 1 s: its last pose; 2 s: published before the late frame of 1.5 s, not held;
-    # 3 s: the pose after the late frame.
-    assert {stamp: p.publish_ns for stamp, p in final.items()} == {1 * second: 115,
-                                                                   3 * second: 355}
-    assert comparison.provisional == 3
+    final = _final_poses(EVENTS, poses, comparison)
+    return {stamp // SECOND: p.publish_ns for stamp, p in final.items()}, comparison.provisional
+
+
+def test_each_pose_is_compared_when_the_node_took_the_events_in_their_order():
+    # one pose per event: after the odometry of 1 s, its frame, the odometry of 2 s
+    assert compared([pose(SECOND, 105), pose(SECOND, 115), pose(2 * SECOND, 205)]) == (
+        {1: 115, 2: 205}, 1)          # the first pose of 1 s came before the frame of 1 s
+
+
+def test_a_pose_the_other_topic_s_queued_event_was_not_in_is_not_held_against_it():
+    # The node took the odometry of 2 s before the frame of 1 s, still queued on its own
+    # topic (published at 110, before the pose of 2 s): that pose lacks the frame, and the
+    # last one (the frame answered as of 2 s) has everything.
+    assert compared([pose(SECOND, 105), pose(2 * SECOND, 205), pose(2 * SECOND, 210)]) == (
+        {2: 210}, 2)
+
+
+def test_the_poses_after_an_event_later_than_the_horizon_are_not_compared():
+    events = [odom(5 * SECOND, 100), odom(6 * SECOND, 200), frame(3 * SECOND, 300)]
+    poses = [pose(5 * SECOND, 105), pose(6 * SECOND, 205), pose(6 * SECOND, 305)]
+    comparison = LandmarkComparison()
+    kept = _before_too_late(events, poses, 2.0, comparison)
+    assert [p.publish_ns for p in kept] == [105, 205] and comparison.after_too_late == 1
+    assert _before_too_late(events, poses, 5.0, LandmarkComparison()) == poses

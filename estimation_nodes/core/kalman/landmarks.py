@@ -126,8 +126,10 @@ class LandmarkModel:
                 math.isfinite(v) and 0 < v <= 10 for v in self.odometry_scale):
             raise ValueError(f"odometry_scale: expected [forward, turn] in (0, 10], got "
                              f"{list(self.odometry_scale)}")
-        if not (math.isfinite(self.range_scale_std) and 0 <= self.range_scale_std <= 1):
-            raise ValueError(f"range_scale_std: expected 0 <= std <= 1, got "
+        # A prior wider than a quarter would put sigma points and iterates near a scale
+        # of 0 (no range at all): no camera is that badly known.
+        if not (math.isfinite(self.range_scale_std) and 0 <= self.range_scale_std <= 0.25):
+            raise ValueError(f"range_scale_std: expected 0 <= std <= 0.25, got "
                              f"{self.range_scale_std!r}")
         if self.points is not None and self.points.n != self.state_size:
             raise ValueError(f"points: sigma points for a state of {self.points.n}, but the "

@@ -321,8 +321,11 @@ def _main_landmarks(args: argparse.Namespace) -> int:
         return 2
     notes = []
     if comparison.provisional:
-        notes.append(f"  {plural(comparison.provisional, 'pose')} provisional (published "
-                     f"again, or before a late event), not compared")
+        notes.append(f"  {plural(comparison.provisional, 'pose')} provisional (an event of "
+                     f"its stamp or older may not have been taken yet), not compared")
+    if comparison.after_too_late:
+        notes.append(f"  {plural(comparison.after_too_late, 'pose')} after an event later "
+                     f"than reorder_horizon (applied out of order), not compared")
     if comparison.dropped:
         notes.append(f"  {plural(comparison.dropped, 'input')} the localizer drops (not "
                      f"finite, unstamped or malformed)")

@@ -2,27 +2,34 @@
 
 ekf_localizer applies its events (odometry twists, camera frames) in the order of
 their stamps, an odometry message before a frame of the same stamp
-(core/causal_order.py puts a late one in its place), and publishes after each the
-pose as of the newest stamp it has seen. So the last pose it published with a stamp
-is the filter over every event up to that stamp, once all of them had come: the
-replay runs the filter over the recorded events in stamp order, from the recorded
-parameters' initial pose, and compares that last pose, and its covariance, with the
-offline filter's at the same stamp.
+(core/causal_order.py puts a late one in its place), and publishes one pose after
+each event it takes, stamped with the newest stamp it has seen. The replay runs the
+filter over the recorded events in stamp order, from the recorded parameters'
+initial pose, and compares each pose the node published, and its covariance, with
+the offline filter's at the pose's stamp, where it can tell that the node had taken
+every event up to that stamp by then:
 
-What the replay cannot hold against the node:
-
-- a pose published before an event of an older or equal stamp was (a late event
-  the node had not heard yet): provisional, superseded by what came after;
-- an earlier pose of a stamp the node published again (a late event of an older
-  stamp came, and the node answered it as of its newest stamp);
-- an ``initialpose`` restarts the filter at the next event from that pose: the
-  events published after it make a run of their own. ``~/reset`` (a service call)
-  is not recorded: the poses after one differ, and the replay says so.
+- the node's k-th pose came after exactly k events, and each topic's events are
+  taken in the order they were published. So of the odometry, at least k minus
+  the frames published before the pose had been taken, and of the frames, at
+  least k minus the odometry published before it. A pose is compared when those
+  include every event of its stamp or older; any other is provisional (a late
+  event, or one still queued on the other topic), counted and not compared. A
+  pose the recorder missed only makes these bounds looser;
+- an event that came more than ``reorder_horizon`` behind the newest (the node
+  applies it late, out of order; with a horizon of 0, any out-of-order event)
+  ends the comparison: the poses after it are counted, not compared;
+- an ``initialpose`` the node takes (finite, its covariance positive definite)
+  restarts the filter from that pose at the next event: the events and poses
+  published after it make a run of their own (a pose of the old run published
+  after the initialpose was sent would be taken for the new run's). ``~/reset`` (a
+  service call) is not recorded: the poses after one differ, and the replay says
+  so.
 """
 
 from __future__ import annotations
 
-from collections import defaultdict
+from bisect import bisect_left, bisect_right
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -54,8 +61,10 @@ class LandmarkComparison:
     compared: int = 0
     worst: dict[str, float] = field(default_factory=lambda: {"pose": 0.0, "covariance": 0.0})
     differences: list[str] = field(default_factory=list)
-    #: Poses not compared: published before a late event, or published again.
+    #: Poses not compared: an event of their stamp or older may not have been taken yet.
     provisional: int = 0
+    #: Poses not compared: published after an event later than reorder_horizon.
+    after_too_late: int = 0
     #: Inputs the node drops (a twist that is not finite, no stamp, a bad cloud).
     dropped: int = 0
 
@@ -87,7 +96,7 @@ def settings_of(parameters_yaml: str) -> EkfLocalizerSettings:
 def input_event(record: Recorded) -> Event | None:
     """The event the node makes of a recorded input; None for one it drops."""
     stamp = header_stamp_ns(record.msg)
-    if stamp <= 0:
+    if stamp == 0:                          # unstamped: the node drops it
         return None
     if record.topic == ODOM:
         twist = record.msg.twist.twist
@@ -108,12 +117,25 @@ def runs_of(records: list[Recorded]) -> list[tuple[Any, list[Event], list[Record
     runs: list[tuple[Any, list[Event], list[Recorded]]] = [(None, [], [])]
     for record in records:
         if record.topic == INITIAL_POSE:
-            runs.append((record.msg, [], []))
+            if _taken_prior(record.msg):
+                runs.append((record.msg, [], []))
         elif record.topic in RANKS:
             runs[-1][1].append(input_event(record) or Event(-1, -1, record.publish_ns, ()))
         elif record.topic == POSE:
             runs[-1][2].append(record)
     return runs
+
+
+def _taken_prior(msg) -> bool:
+    """Whether the node takes this initialpose (nodes/ekf_localizer.py's test)."""
+    pose, covariance = np.array(planar_pose(msg.pose.pose)), covariance_3x3(msg.pose.covariance)
+    if not (np.isfinite(pose).all() and np.isfinite(covariance).all()):
+        return False
+    try:
+        np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError:
+        return False
+    return True
 
 
 def replay_landmarks(path: Path, parameters_yaml: str | None,
@@ -131,12 +153,15 @@ def replay_landmarks(path: Path, parameters_yaml: str | None,
         start = (settings.initial_pose, settings.initial_covariance) if prior is None \
             else (np.array(planar_pose(prior.pose.pose)), covariance_3x3(prior.pose.covariance))
         _compare_run(settings, start, kept, poses, tolerance, comparison)
+        if comparison.after_too_late:
+            break                             # the node's state from there on is not known
     return comparison
 
 
 def _compare_run(settings: EkfLocalizerSettings, start: tuple, events: list[Event],
                  poses: list[Recorded], tolerance: float,
                  comparison: LandmarkComparison) -> None:
+    poses = _before_too_late(events, poses, settings.reorder_horizon, comparison)
     final = _final_poses(events, poses, comparison)
     if not final:
         return
@@ -150,40 +175,55 @@ def _compare_run(settings: EkfLocalizerSettings, start: tuple, events: list[Even
         _check(final[stamp], localization, tolerance, comparison)
 
 
+def _before_too_late(events: list[Event], poses: list[Recorded], horizon_s: float,
+                     comparison: LandmarkComparison) -> list[Recorded]:
+    """The poses published before the first event that came more than the horizon behind
+    the newest (by publish order); the others are counted."""
+    newest, horizon_ns = None, int(horizon_s * 1e9)
+    for event in sorted(events, key=lambda e: e.publish_ns):
+        if newest is not None and event.stamp_ns < newest - horizon_ns:
+            kept = [pose for pose in poses if pose.publish_ns < event.publish_ns]
+            comparison.after_too_late += len(poses) - len(kept)
+            return kept
+        newest = event.stamp_ns if newest is None else max(newest, event.stamp_ns)
+    return poses
+
+
 def _final_poses(events: list[Event], poses: list[Recorded],
                  comparison: LandmarkComparison) -> dict[int, Recorded]:
-    """The poses to compare, by stamp: each stamp's last, unless an event of an older or
-    equal stamp was published after it."""
-    last: dict[int, Recorded] = {}
-    for pose in poses:
+    """The poses that had every event of their stamp or older in them, by stamp (the last
+    such one of a stamp); the others are counted as provisional."""
+    by_topic = {rank: sorted((e for e in events if e.rank == rank), key=lambda e: e.publish_ns)
+                for rank in RANKS.values()}
+    published = {rank: [e.publish_ns for e in topic_events]
+                 for rank, topic_events in by_topic.items()}
+    needed = {rank: _NeededCount(topic_events) for rank, topic_events in by_topic.items()}
+    final: dict[int, Recorded] = {}
+    for k, pose in enumerate(sorted(poses, key=lambda p: p.publish_ns), start=1):
         stamp = header_stamp_ns(pose.msg)
-        if stamp in last:
-            comparison.provisional += 1
-        last[stamp] = pose
-    # The latest publish time among the events of each stamp and older ones.
-    latest_by_stamp: dict[int, int] = defaultdict(int)
-    for event in events:
-        latest_by_stamp[event.stamp_ns] = max(latest_by_stamp[event.stamp_ns], event.publish_ns)
-    final = {}
-    stamps = sorted(latest_by_stamp)
-    running, latest_up_to = 0, {}
-    for stamp in stamps:
-        running = max(running, latest_by_stamp[stamp])
-        latest_up_to[stamp] = running
-    for stamp, pose in last.items():
-        newest_input = _at_or_before(stamps, latest_up_to, stamp)
-        if newest_input > pose.publish_ns:
-            comparison.provisional += 1
-        else:
+        before = {rank: bisect_left(times, pose.publish_ns) for rank, times in published.items()}
+        taken_at_least = {rank: k - sum(n for other, n in before.items() if other != rank)
+                          for rank in before}
+        if all(taken_at_least[rank] >= needed[rank].up_to(stamp) for rank in by_topic):
             final[stamp] = pose
+        else:
+            comparison.provisional += 1
     return final
 
 
-def _at_or_before(stamps: list[int], latest_up_to: dict[int, int], stamp: int) -> int:
-    from bisect import bisect_right
+class _NeededCount:
+    """How many of a topic's events (in publish order) must have been taken for all of its
+    events up to a stamp to be in: the position of the last such one."""
 
-    index = bisect_right(stamps, stamp)
-    return latest_up_to[stamps[index - 1]] if index else 0
+    def __init__(self, topic_events: list[Event]) -> None:
+        ordered = sorted((e.stamp_ns, position)
+                         for position, e in enumerate(topic_events, start=1))
+        self._stamps = [stamp for stamp, _ in ordered]
+        self._last_position = list(np.maximum.accumulate([p for _, p in ordered] or [0]))
+
+    def up_to(self, stamp: int) -> int:
+        index = bisect_right(self._stamps, stamp)
+        return int(self._last_position[index - 1]) if index else 0
 
 
 def _apply(localization: LandmarkLocalization, event: Event) -> None:
