@@ -50,7 +50,7 @@ from estimation_nodes.params.landmarks import landmark_model  # noqa: E402
 from estimation_nodes.nodes.qos import latched_qos  # noqa: E402
 from estimation_nodes.params.specs import LANDMARK_MODEL_SPECS, spec_defaults  # noqa: E402
 from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
-from estimation_nodes.tools.importers.cli import _ns  # noqa: E402
+from estimation_nodes.tools.importers.cli import seconds_to_ns  # noqa: E402
 from estimation_nodes.tools.importers.utias import read_run  # noqa: E402
 
 #: Rates of the latency run (Hz): odometry, camera frames.
@@ -205,7 +205,7 @@ def report_robot(args, run, initial: np.ndarray, watcher: PoseWatcher) -> list[l
     core_times, core_poses, _, _, _ = run_filter(started, model, np.diag([0.01] * 3))
     # by the stamps the node saw: the import rounds each time to the nanosecond, and a
     # float comparison could pair a corrected pose with the one before its correction
-    core_ns = np.array([_ns(t) for t in core_times])
+    core_ns = np.array([seconds_to_ns(t) for t in core_times])
     index = np.searchsorted(core_ns, np.array(stamps), side="right") - 1
     difference = np.hypot(*(core_poses[index, :2] - poses[:, :2]).T)
     rows = [["poses published", str(len(stamps))],

@@ -38,12 +38,13 @@ POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 POINT_CLOUD = "sensor_msgs/msg/PointCloud2"
 
 
-def _ns(t: float) -> int:
+def seconds_to_ns(t: float) -> int:
+    """A log's time in seconds as the importers stamp it: rounded to the nanosecond."""
     return int(round(t * 1e9))
 
 
 def _stamp(header, t: float, frame_id: str) -> None:
-    set_stamp(header, _ns(t), frame_id)
+    set_stamp(header, seconds_to_ns(t), frame_id)
 
 
 class _Writer:
@@ -58,7 +59,7 @@ class _Writer:
     def add(self, topic: str, t: float, msg) -> None:
         from rclpy.serialization import serialize_message
 
-        self._pending.append((_ns(t), len(self._pending), topic, serialize_message(msg)))
+        self._pending.append((seconds_to_ns(t), len(self._pending), topic, serialize_message(msg)))
         self.counts[topic] += 1
 
     def close(self) -> None:
@@ -126,7 +127,7 @@ def import_utias(directory: Path, robot: int, out: Path,
         writer.add("/odom", t, odom)
     for t, rows in run.frames():
         seen = [(int(key), float(r), float(b)) for _, key, r, b in rows]
-        writer.add("/landmark_observations", t, landmark_cloud(_ns(t), "camera", seen))
+        writer.add("/landmark_observations", t, landmark_cloud(seconds_to_ns(t), "camera", seen))
     for t, x, y, theta in run.truth:
         truth = PoseStamped()
         _stamp(truth.header, t, "map")
