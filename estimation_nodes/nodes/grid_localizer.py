@@ -10,7 +10,7 @@ state grid: RViz's Map display and Foxglove's 3D panel draw it) and
 ``localization_quality`` (the belief's probability near that pose), the
 quality first. Bad messages are dropped and counted, never a NaN belief.
 
-A scan waits up to SCAN_WAIT_S for the odometry of its time and is dropped
+A scan waits up to ``odom_wait`` for the odometry of its time and is dropped
 if it does not come; a scan that comes while another waits supersedes it.
 Each published pose carries the stamp of what made it: its scan's time, the
 initial pose's, or the time of a start or reset (uniform belief). So a
@@ -64,11 +64,11 @@ from estimation_nodes.params import topics
 from estimation_nodes.params.grid import build_grid_localizer_settings
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS
 
-#: How long a scan waits for the odometry of its time (as tf's message filter waits for a
-#: transform); after that it is dropped, as that filter drops it: used with an older
-#: odometry pose, its update would depend on when messages arrived, and no replay of the
-#: recorded run could make it again.
-SCAN_WAIT_S = 0.2
+#: How often a waiting scan is checked against its ``odom_wait`` (s). A scan that waited
+#: that long for the odometry of its time is dropped, as tf's message filter drops it:
+#: used with an older odometry pose, its update would depend on when messages arrived,
+#: and no replay of the recorded run could make it again.
+SCAN_WAIT_CHECK_S = 0.05
 #: Odometry messages queued for the localizer: 20 s at 10 Hz, 4 s at 50 Hz, so an update
 #: that keeps it busy loses none (a lost one would move the next update's prediction).
 ODOM_DEPTH = ODOMETRY_HISTORY
@@ -121,7 +121,8 @@ class GridLocalizer(Node):
         self.create_timer(self._settings.diagnostics_period, self._publish_diagnostics)
         #: A scan waiting for the odometry of its time: (message, stamp ns, deadline).
         self._waiting_scan: tuple[LaserScan, int | None, float] | None = None
-        self.create_timer(SCAN_WAIT_S / 4, self._scan_waited_out)
+        self.create_timer(min(SCAN_WAIT_CHECK_S, self._settings.odom_wait / 4),
+                          self._scan_waited_out)
 
     def _start(self, model: grid.GridModel) -> None:
         self.localization = self._settings.localization(model)
@@ -174,7 +175,7 @@ class GridLocalizer(Node):
         if waiting is not None and time.monotonic() > waiting[2]:
             self._waiting_scan = None
             self._reject("scan_without_odometry", f"scan dropped: no odometry of its time "
-                         f"came within {SCAN_WAIT_S} s")
+                         f"came within odom_wait ({self._settings.odom_wait:g} s)")
 
     def _on_scan(self, msg: LaserScan) -> None:
         if self.localization is None:
@@ -191,7 +192,7 @@ class GridLocalizer(Node):
             # it, so the update does not depend on which came first.
             if self._waiting_scan is not None:
                 self.handled["scan_superseded"] += 1
-            self._waiting_scan = (msg, stamp, time.monotonic() + SCAN_WAIT_S)
+            self._waiting_scan = (msg, stamp, time.monotonic() + self._settings.odom_wait)
             return
         self._use_scan(msg, stamp)
 

@@ -47,6 +47,8 @@ class GridLocalizerSettings:
     update_min_d: float
     update_min_a: float
     max_odom_jump: float
+    #: Seconds a scan waits for the odometry of its time.
+    odom_wait: float
     kidnap_probability: float
     belief_floor: float
     max_beams: int
@@ -85,7 +87,8 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
         sensor, odometry_noise(values), values["resolution"], values["heading_bins"],
         values["max_states"], occupancy, model, update_min_d=values["update_min_d"],
         update_min_a=values["update_min_a"], max_odom_jump=values["max_odom_jump"],
-        kidnap_probability=values["kidnap_probability"], max_beams=values["max_beams"],
+        odom_wait=values["odom_wait"], kidnap_probability=values["kidnap_probability"],
+        max_beams=values["max_beams"],
         belief_floor=values["belief_floor"],
         independent_beams=values["laser_independent_beams"],
         quality_radius=values["quality_radius"],

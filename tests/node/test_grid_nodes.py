@@ -131,6 +131,30 @@ def test_a_repeated_odometry_stamp_is_counted_and_the_first_pose_kept(nodes, exe
     assert localizer.localization._odometry_at(7 * 10**9) == pytest.approx((1.0, 0.0, 0.0))
 
 
+def test_a_scan_waits_odom_wait_for_the_odometry_of_its_time(nodes, executor,
+                                                            collector_factory):
+    """A real log's odometry comes at 2 Hz in places: a scan whose odometry comes 0.5 s
+    after it is answered with the default odom_wait (1 s)."""
+    localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=8)
+    driver = collector_factory({"pose": PoseWithCovarianceStamped}, name="driver")
+    wheels = driver.node.create_publisher(Odometry, "odom", 10)
+    laser = driver.node.create_publisher(LaserScan, "scan", 10)
+    assert spin_until(executor, lambda: wheels.get_subscription_count() > 0
+                      and laser.get_subscription_count() > 0, 10.0)
+    for stamp_s, publisher, msg in ((1, wheels, odom(1.0, 0.5, 0.0)),
+                                    (2, laser, scan([1.0] * 63))):
+        msg.header.stamp.sec = stamp_s
+        publisher.publish(msg)
+    assert spin_until(executor, lambda: localizer._waiting_scan is not None, 5.0)
+    spin_until(executor, lambda: False, 0.5)           # the odometry of 2 s comes late
+    late = odom(1.0, 0.5, 0.0)
+    late.header.stamp.sec = 2
+    wheels.publish(late)
+    assert spin_until(executor, lambda: localizer.handled["scan"] == 1, 5.0), \
+        (localizer.handled, localizer.rejected)
+    assert not localizer.rejected
+
+
 def test_scans_the_localizer_never_saw_are_counted_and_reported(nodes, executor,
                                                                collector_factory):
     localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=8,

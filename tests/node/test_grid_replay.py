@@ -24,7 +24,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
 from estimation_nodes.core.sim import planar
-from estimation_nodes.nodes.grid_localizer import SCAN_WAIT_S, GridLocalizer
+from estimation_nodes.nodes.grid_localizer import GridLocalizer
 from estimation_nodes.nodes.grid_messages import fill_pose
 from estimation_nodes.nodes.qos import latched_qos
 from estimation_nodes.params.map_files import read_map_file
@@ -141,7 +141,7 @@ def test_a_run_in_which_the_localizer_left_scans_out_replays_equal(context, exec
         driver.scan(6, "is not due")
         driver.scan(7, "waits")                    # due, and its odometry comes too late
         driver.wait(driver.counted("scan_without_odometry", "rejected"),
-                    f"drop scan 7 after {SCAN_WAIT_S} s")
+                    "drop scan 7 after odom_wait")
         driver.odom(7)
         driver.odom(8)
         driver.scan(8, "updates")
