@@ -30,8 +30,12 @@ from estimation_nodes.core.causal_order import CausalOrder
 from estimation_nodes.core.kalman import ukf
 from estimation_nodes.core.kalman.landmarks import LandmarkLocalization
 from estimation_nodes.nodes.diagnostics import status_array
-from estimation_nodes.nodes.grid_messages import covariance_3x3, planar_pose, pose_with_covariance
-from estimation_nodes.nodes.landmark_messages import MalformedCloudError, landmark_points
+from estimation_nodes.nodes.grid_messages import pose_with_covariance
+from estimation_nodes.nodes.landmark_messages import (
+    MalformedCloudError,
+    initial_pose_of,
+    landmark_points,
+)
 from estimation_nodes.nodes.parameters import declare_and_build, overlay, rejection
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
@@ -162,13 +166,9 @@ class EkfLocalizer(Node):
                                   MAX_REORDER_EVENTS)
 
     def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
-        pose = np.array(planar_pose(msg.pose.pose))
-        covariance = covariance_3x3(msg.pose.covariance)
         try:
-            if not (np.isfinite(pose).all() and np.isfinite(covariance).all()):
-                raise ValueError("not finite")
-            np.linalg.cholesky(covariance)
-        except (ValueError, np.linalg.LinAlgError) as error:
+            pose, covariance = initial_pose_of(msg)
+        except ValueError as error:
             self._reject("bad_initialpose", f"initialpose dropped: {error}")
             return
         self._initial = (pose, covariance)

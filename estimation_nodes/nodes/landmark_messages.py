@@ -11,6 +11,7 @@ import numpy as np
 from sensor_msgs.msg import PointCloud2, PointField
 
 from estimation_nodes.core.kalman.landmarks import Observation
+from estimation_nodes.nodes.grid_messages import covariance_3x3, planar_pose
 from estimation_nodes.nodes.stamps import set_stamp
 
 #: PointCloud2 datatypes (sensor_msgs/PointField).
@@ -19,6 +20,21 @@ FLOAT32, UINT32 = PointField.FLOAT32, PointField.UINT32
 
 class MalformedCloudError(ValueError):
     """A landmark cloud without the fields this node reads."""
+
+
+def initial_pose_of(msg) -> tuple[np.ndarray, np.ndarray]:
+    """An initialpose's pose (x, y, yaw) and 3 x 3 covariance, as ekf_localizer takes it
+    (and estimation_replay judges it); ValueError saying why for one it refuses: not
+    finite, or a covariance that is not positive definite."""
+    pose = np.array(planar_pose(msg.pose.pose))
+    covariance = covariance_3x3(msg.pose.covariance)
+    if not (np.isfinite(pose).all() and np.isfinite(covariance).all()):
+        raise ValueError("not finite")
+    try:
+        np.linalg.cholesky(covariance)
+    except np.linalg.LinAlgError as error:
+        raise ValueError(str(error)) from None
+    return pose, covariance
 
 
 def landmark_points(msg: PointCloud2) -> list[Observation]:

@@ -3,15 +3,19 @@ offline filter (tools/replay/landmarks.py)."""
 
 from __future__ import annotations
 
+import pytest
 from geometry_msgs.msg import PoseWithCovarianceStamped
 
+from estimation_nodes.nodes.landmark_messages import initial_pose_of
 from estimation_nodes.tools.replay.grid_localizer import Recorded
 from estimation_nodes.tools.replay.landmarks import (
+    INITIAL_POSE,
     POSE,
     Event,
     LandmarkComparison,
     _before_too_late,
     _final_poses,
+    runs_of,
 )
 
 SECOND = 10**9
@@ -62,3 +66,20 @@ def test_the_poses_after_an_event_later_than_the_horizon_are_not_compared():
     kept = _before_too_late(events, poses, 2.0, comparison)
     assert [p.publish_ns for p in kept] == [105, 205] and comparison.after_too_late == 1
     assert _before_too_late(events, poses, 5.0, LandmarkComparison()) == poses
+
+
+def test_only_an_initialpose_the_node_takes_begins_a_run():
+    def initialpose(x: float, variance: float) -> Recorded:
+        msg = PoseWithCovarianceStamped()
+        msg.pose.pose.position.x, msg.pose.pose.orientation.w = x, 1.0
+        msg.pose.covariance[0] = msg.pose.covariance[7] = msg.pose.covariance[35] = variance
+        return Recorded(INITIAL_POSE, 0, msg)
+
+    runs = runs_of([initialpose(1.0, 0.1),                  # taken
+                    initialpose(float("nan"), 0.1),         # not finite: refused
+                    initialpose(2.0, 0.0)])                 # no positive definite covariance
+    assert len(runs) == 2 and runs[0][0] is None
+    pose, covariance = runs[1][0]
+    assert pose.tolist() == [1.0, 0.0, 0.0] and covariance[0, 0] == 0.1
+    with pytest.raises(ValueError, match="not finite"):
+        initial_pose_of(initialpose(float("nan"), 0.1).msg)

@@ -79,7 +79,8 @@ class OdometryStep(Enum):
     #: Stamped as the last one taken: ignored. The first pose at a time is that time's pose
     #: (tf2 keeps the first of repeated data too), so a scan of that time predicts with the
     #: same odometry whether it is answered live, as soon as that first one came, or
-    #: replayed after all of them (real logs repeat stamps: Intel's 2318 times).
+    #: replayed after all of them (real logs repeat stamps: the imported Intel log, 4,819
+    #: of its 14,541 odometry messages).
     REPEATED_STAMP = "repeated stamp"
 
 

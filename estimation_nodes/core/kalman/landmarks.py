@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation_nodes.core.kalman import ekf, ukf
+from estimation_nodes.core.kalman import ekf, range_bearing, ukf
 from estimation_nodes.core.kalman.ekf import Innovation
 from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, SensorPose
 from estimation_nodes.core.kalman.unicycle import UnicycleNoise
@@ -220,10 +220,10 @@ class LandmarkLocalization:
 
     @property
     def range_scale(self) -> tuple[float, float]:
-        """The range's scale and its std (0 where it is not estimated)."""
-        if len(self.x) > 3:
-            return float(self.x[3]), math.sqrt(max(float(self.P[3, 3]), 0.0))
-        return self.model.ranging.scale, 0.0
+        """The range's scale (range_bearing.range_scale) and its std (0 where it is not
+        estimated)."""
+        std = math.sqrt(max(float(self.P[3, 3]), 0.0)) if len(self.x) > 3 else 0.0
+        return range_bearing.range_scale(self.x, self.model.ranging), std
 
     # --- state, as causal_order.py saves and restores it ---------------------------------
 

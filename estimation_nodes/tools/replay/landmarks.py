@@ -38,7 +38,11 @@ import numpy as np
 
 from estimation_nodes.core.kalman.landmarks import LandmarkLocalization
 from estimation_nodes.nodes.grid_messages import covariance_3x3, planar_pose
-from estimation_nodes.nodes.landmark_messages import MalformedCloudError, landmark_points
+from estimation_nodes.nodes.landmark_messages import (
+    MalformedCloudError,
+    initial_pose_of,
+    landmark_points,
+)
 from estimation_nodes.params import topics
 from estimation_nodes.params.landmarks import EkfLocalizerSettings, build_ekf_localizer_settings
 from estimation_nodes.params.param_files import read_node_parameters
@@ -112,30 +116,21 @@ def input_event(record: Recorded) -> Event | None:
 
 
 def runs_of(records: list[Recorded]) -> list[tuple[Any, list[Event], list[Recorded]]]:
-    """(initialpose message or None, its events, its poses) for each run between restarts,
-    by publish order."""
+    """((pose, covariance) of the initialpose that began it, or None, its events, its poses)
+    for each run between restarts, by publish order; an initialpose the node refuses
+    begins none."""
     runs: list[tuple[Any, list[Event], list[Recorded]]] = [(None, [], [])]
     for record in records:
         if record.topic == INITIAL_POSE:
-            if _taken_prior(record.msg):
-                runs.append((record.msg, [], []))
+            try:
+                runs.append((initial_pose_of(record.msg), [], []))
+            except ValueError:
+                pass
         elif record.topic in RANKS:
             runs[-1][1].append(input_event(record) or Event(-1, -1, record.publish_ns, ()))
         elif record.topic == POSE:
             runs[-1][2].append(record)
     return runs
-
-
-def _taken_prior(msg) -> bool:
-    """Whether the node takes this initialpose (nodes/ekf_localizer.py's test)."""
-    pose, covariance = np.array(planar_pose(msg.pose.pose)), covariance_3x3(msg.pose.covariance)
-    if not (np.isfinite(pose).all() and np.isfinite(covariance).all()):
-        return False
-    try:
-        np.linalg.cholesky(covariance)
-    except np.linalg.LinAlgError:
-        return False
-    return True
 
 
 def replay_landmarks(path: Path, parameters_yaml: str | None,
@@ -151,7 +146,7 @@ def replay_landmarks(path: Path, parameters_yaml: str | None,
         comparison.dropped += sum(1 for e in events if e.rank < 0)
         kept = [e for e in events if e.rank >= 0]
         start = (settings.initial_pose, settings.initial_covariance) if prior is None \
-            else (np.array(planar_pose(prior.pose.pose)), covariance_3x3(prior.pose.covariance))
+            else prior
         _compare_run(settings, start, kept, poses, tolerance, comparison)
         if comparison.after_too_late:
             break                             # the node's state from there on is not known
