@@ -5,9 +5,12 @@ Every noise figure and calibration of the UTIAS parameter file
 given (by default 1 to 3 of dataset 7): one set of figures for every robot, none
 tuned to one. The ground truth (Vicon) is what each figure is measured against:
 
-- the camera: its reported range against the true distance and against the true
-  depth (the distance along the camera's axis), the scale of the better one, the
-  spread of what is left (std = a + b * range), and the bearing's std;
+- the camera: where it sees from on the robot, relative to the point Vicon tracks
+  (sensor_pose, fitted by least squares with the range's scale: an offset of a few
+  centimetres is a bias the filter would otherwise carry into every pose), its
+  reported range against the true distance and against the true depth (the distance
+  along the camera's axis), the scale of the better one, the spread of what is left
+  (std = a + b * range), and the bearing's std;
 - the odometry (commanded speeds): the delay after which the robot follows a
   command, the share of the commanded forward and turn speeds it drives, and the
   variance of a step's distance and turn (the filter's noise.* terms), fitted over
@@ -27,7 +30,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import nnls
+from scipy.optimize import least_squares, nnls
 
 from estimation_nodes.tools.importers.utias import UtiasRun, read_run
 
@@ -58,14 +61,25 @@ def _truth_at(run: UtiasRun, times: np.ndarray) -> np.ndarray:
                            + [np.interp(times, truth[:, 0], heading)])
 
 
-def landmark_geometry(run: UtiasRun) -> dict[str, np.ndarray]:
+def _camera_poses(poses: np.ndarray, mount: Sequence[float]) -> np.ndarray:
+    """The camera's x, y, heading for robot ``poses`` with the camera at ``mount``
+    (x, y, yaw on the robot; sensor_pose's convention)."""
+    x, y, yaw = mount
+    cos, sin = np.cos(poses[:, 2]), np.sin(poses[:, 2])
+    return np.column_stack([poses[:, 0] + cos * x - sin * y, poses[:, 1] + sin * x + cos * y,
+                            poses[:, 2] + yaw])
+
+
+def landmark_geometry(run: UtiasRun, mount: Sequence[float] = (0.0, 0.0, 0.0)
+                      ) -> dict[str, np.ndarray]:
     """For every detection of a landmark: the reported range and bearing, the true
-    distance, depth and bearing from Vicon's pose at the detection's time."""
+    distance, depth and bearing from the camera, at ``mount`` on Vicon's pose of the
+    robot at the detection's time."""
     detections = run.detections
     known = np.array([int(s) in run.landmarks for s in detections[:, 1]], dtype=bool)
     detections = detections[known]
     where = np.array([run.landmarks[int(s)] for s in detections[:, 1]])
-    pose = _truth_at(run, detections[:, 0])
+    pose = _camera_poses(_truth_at(run, detections[:, 0]), mount)
     dx, dy = where[:, 0] - pose[:, 0], where[:, 1] - pose[:, 1]
     cos, sin = np.cos(pose[:, 2]), np.sin(pose[:, 2])
     return {"range": detections[:, 2], "bearing": detections[:, 3],
@@ -73,34 +87,65 @@ def landmark_geometry(run: UtiasRun) -> dict[str, np.ndarray]:
             "true_bearing": _wrap(np.arctan2(dy, dx) - pose[:, 2])}
 
 
-def camera_figures(runs: Sequence[UtiasRun]) -> dict[str, float]:
-    """The range model that fits best, its scale, the range's and the bearing's spread."""
-    pooled = [landmark_geometry(run) for run in runs]
-    seen = {key: np.concatenate([g[key] for g in pooled]) for key in pooled[0]}
+def _pooled_geometry(runs: Sequence[UtiasRun], mount: Sequence[float]
+                     ) -> dict[str, np.ndarray]:
+    pooled = [landmark_geometry(run, mount) for run in runs]
+    return {key: np.concatenate([g[key] for g in pooled]) for key in pooled[0]}
+
+
+def _fit_mount(runs: Sequence[UtiasRun], kind: str, keep: np.ndarray,
+               spreads: tuple[float, float]) -> tuple[float, np.ndarray, float]:
+    """The range's scale and the camera's mount (x, y, yaw) that fit the detections
+    ``keep`` best (least squares of the range's residual relative to the range and of
+    the bearing's, each over its ``spreads``), and the range residual's rms there."""
+    relative_std, bearing_std = spreads
+
+    def residuals(q: np.ndarray) -> np.ndarray:
+        seen = _pooled_geometry(runs, q[1:])
+        measured = seen["range"][keep]
+        return np.concatenate([
+            (measured - q[0] * seen[kind][keep]) / measured / relative_std,
+            _wrap(seen["bearing"] - seen["true_bearing"])[keep] / bearing_std])
+
+    fit = least_squares(residuals, np.array([1.0, 0.0, 0.0, 0.0]), x_scale=0.01)
+    seen = _pooled_geometry(runs, fit.x[1:])
+    misfit = _rms(seen["range"][keep] - fit.x[0] * seen[kind][keep])
+    return float(fit.x[0]), fit.x[1:], misfit
+
+
+def camera_figures(runs: Sequence[UtiasRun]) -> dict[str, object]:
+    """The range model that fits best, its scale, the camera's mount on the robot (where
+    it is seen from, relative to the point Vicon tracks), the range's and the bearing's
+    spread there."""
+    seen = _pooled_geometry(runs, (0.0, 0.0, 0.0))
     bearing_error = _wrap(seen["bearing"] - seen["true_bearing"])
     keep = np.abs(bearing_error) < OUTLIER_BEARING
-    figures: dict[str, float] = {"observations": float(keep.sum()),
-                                 "outliers": float((~keep).sum())}
-    residual_std = {}
-    for kind in ("distance", "depth"):
-        true = seen[kind][keep]
-        scale = float(true @ seen["range"][keep] / (true @ true))
+    figures: dict[str, object] = {"observations": float(keep.sum()),
+                                  "outliers": float((~keep).sum())}
+    # the spreads that weigh range against bearing in the mount's fit: the residuals
+    # with the camera at Vicon's point, the range's relative to the range
+    relative = (seen["range"] - seen["distance"]) / seen["range"]
+    spreads = (_rms(relative[keep] - relative[keep].mean()), _rms(bearing_error[keep]))
+    fits = {kind: _fit_mount(runs, kind, keep, spreads) for kind in ("distance", "depth")}
+    for kind, (scale, _, misfit) in fits.items():
         # root mean square, not std: a bias is an error the filter cannot model either
-        residual_std[kind] = _rms(seen["range"][keep] - scale * true)
         figures[f"{kind}_scale"] = scale
-        figures[f"{kind}_residual_std"] = residual_std[kind]
-    kind = min(residual_std, key=residual_std.get)
+        figures[f"{kind}_residual_std"] = misfit
+    kind = min(fits, key=lambda name: fits[name][2])
+    scale, mount, _ = fits[kind]
     figures["range_model"] = "depth" if kind == "depth" else "euclidean"
-    figures["range_scale"] = figures[f"{kind}_scale"]
+    figures["range_scale"] = scale
+    figures["sensor_pose"] = [float(value) for value in mount]
+    seen = _pooled_geometry(runs, mount)
     measured = seen["range"][keep]
-    residual = np.abs(measured - figures["range_scale"] * seen[kind][keep])
+    residual = np.abs(measured - scale * seen[kind][keep])
     # E|e| = sqrt(2/pi) std for a Gaussian e: fit std = a + b range on |e|, the range as
     # measured (LandmarkModel.R takes the measured one)
     coefficients, _ = nnls(np.column_stack([np.ones_like(measured), measured]),
                            residual / math.sqrt(2 / math.pi))
     figures["range_std"] = max(float(coefficients[0]), MIN_RANGE_STD)
     figures["range_std_per_m"] = float(coefficients[1])
-    figures["bearing_std"] = _rms(bearing_error[keep])
+    figures["bearing_std"] = _rms(_wrap(seen["bearing"] - seen["true_bearing"])[keep])
     return figures
 
 
@@ -188,7 +233,8 @@ def calibrate(runs: Sequence[UtiasRun]) -> dict[str, object]:
     camera, odometry = camera_figures(runs), odometry_figures(runs)
     return {
         "range_model": camera["range_model"], "range_scale": camera["range_scale"],
-        "range_std": camera["range_std"], "range_std_per_m": camera["range_std_per_m"],
+        "sensor_pose": camera["sensor_pose"], "range_std": camera["range_std"],
+        "range_std_per_m": camera["range_std_per_m"],
         "bearing_std": camera["bearing_std"],
         "odometry_delay": odometry["odometry_delay"],
         "odometry_scale": [odometry["forward_scale"], odometry["turn_scale"]],
@@ -221,7 +267,7 @@ def main() -> None:
           f"of the forward and {odometry['turn_scale']:.3f} of the turn speed commanded")
     print("parameters (ekf_localizer):")
     for name, value in calibrate(runs).items():
-        shown = [round(v, 4) for v in value] if isinstance(value, list) else (
+        shown = [round(v, 5) for v in value] if isinstance(value, list) else (
             value if isinstance(value, str) else f"{value:.4g}")
         print(f"  {name}: {shown}")
 
