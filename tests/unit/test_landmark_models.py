@@ -119,6 +119,35 @@ def test_the_iterated_ekf_finds_the_mode_of_the_posterior():
     assert converged
 
 
+def test_the_iterated_ekf_never_ends_where_the_posterior_is_worse_than_one_pass():
+    # Wide priors (a recovery's: metres and tens of degrees): Gauss-Newton may leap to a
+    # far point where the one landmark fits as well; the single pass is kept there.
+    rng = np.random.default_rng(21)
+    R = np.diag([0.05 ** 2, 0.016 ** 2])
+    kept = fell_back = 0
+    for _ in range(300):
+        x0 = np.array([*rng.uniform(-2, 2, 2), rng.uniform(-math.pi, math.pi)])
+        P = np.diag([rng.uniform(0.01, 9.0)] * 2 + [rng.uniform(0.01, 1.5) ** 2])
+        landmark = tuple(rng.uniform(-4, 4, 2))
+        truth = x0 + rng.multivariate_normal(np.zeros(3), P)
+        z = range_bearing.expected(truth, landmark, SENSOR, DEPTH)
+        if z[0] <= 0.1:
+            continue
+        observed = ekf.innovation(x0, P, z, landmark, SENSOR, R, DEPTH)
+        single, _ = ekf.correct(x0, P, observed, R)
+        x, _, searched = ekf.correct_iterated(x0, P, observed, z, landmark, SENSOR, R, DEPTH,
+                                              10)
+        costs = [ekf.posterior_cost(at, x0, P, z, landmark, SENSOR, R, DEPTH)
+                 for at in (x, single)]
+        assert costs[0] <= costs[1] * (1 + 1e-9)
+        if searched:
+            kept += 1
+        else:
+            fell_back += 1
+            np.testing.assert_array_equal(x, single)
+    assert kept > 30 and fell_back > 0, (kept, fell_back)
+
+
 def test_a_correction_that_fails_is_an_unstable_observation_not_an_error(monkeypatch):
     # An iterate may land on the landmark itself, where its bearing is undefined.
     def on_the_landmark(*_args, **_kwargs):

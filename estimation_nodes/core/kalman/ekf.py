@@ -157,10 +157,18 @@ def correct_iterated(x: FloatArray, P: FloatArray, observed: Innovation, z: Floa
                      ranging: Ranging, iterations: int) -> tuple[FloatArray, FloatArray, bool]:
     """The observation applied by the iterated EKF, at most ``iterations`` passes (the
     first is ``observed``, linearized at x); the Joseph form at the last linearization.
-    The third value: whether the last pass moved less than ITERATION_STEP (always True
-    for one pass, the EKF). Only the mean is updated between passes."""
-    x_next = shifted(x, gain(observed), observed.y)
-    last, converged = observed, iterations == 1
+    The third value: whether the search was kept (always True for one pass, the EKF).
+    Only the mean is updated between passes.
+
+    Gauss-Newton may not converge, or converge far away: with the covariance wide (a
+    recovery) it can leap metres from x to where the one landmark fits as well. The
+    search is kept only where it converged to a lower posterior cost than the single
+    pass reaches; elsewhere the single pass is the answer."""
+    single = correct(x, P, observed, R)
+    if iterations == 1:
+        return (*single, True)
+    x_next = single[0]
+    last, converged = observed, False
     for _ in range(iterations - 1):
         at = x_next
         here = innovation(at, P, z, landmark, sensor, R, ranging)
@@ -175,4 +183,18 @@ def correct_iterated(x: FloatArray, P: FloatArray, observed: Innovation, z: Floa
         if np.abs(step).max() <= ITERATION_STEP:
             converged = True
             break
-    return (*correct(x, P, last, R), converged)
+    cost = lambda at: posterior_cost(at, x, P, z, landmark, sensor, R, ranging)  # noqa: E731
+    if not converged or cost(x_next) > cost(single[0]):
+        return (*single, False)
+    return (*correct(x, P, last, R), True)
+
+
+def posterior_cost(at: FloatArray, x: FloatArray, P: FloatArray, z: FloatArray,
+                   landmark: tuple[float, float], sensor: SensorPose, R: FloatArray,
+                   ranging: Ranging) -> float:
+    """(at - x)' P^-1 (at - x) + (z - h(at))' R^-1 (z - h(at)): what the iterated EKF's
+    search lowers (its minimum is the posterior's mode)."""
+    moved = at - x
+    moved[2] = wrap(moved[2])
+    y = range_bearing.residual(z, range_bearing.expected(at, landmark, sensor, ranging))
+    return float(moved @ np.linalg.solve(P, moved) + y @ np.linalg.solve(R, y))

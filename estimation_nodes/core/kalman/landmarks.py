@@ -371,7 +371,8 @@ class LandmarkLocalization:
                     self.x, self.P, observed, z, landmark, model.sensor, model.R(float(z[0])),
                     model.ranging, model.iterations)
                 if not converged:
-                    self.counts["iterations_unconverged"] += 1
+                    # the single pass's answer (ekf.correct_iterated says when)
+                    self.counts["iterations_fell_back"] += 1
             elif model.kind == "ekf":
                 x, P = ekf.correct(self.x, self.P, observed, model.R(float(z[0])))
             else:
