@@ -322,10 +322,15 @@ def test_a_lost_filter_recovers_after_recovery_time_instead_of_gating_for_ever(k
     assert final_error(None, gated_only, 3) > 1.0
     recovering = LandmarkLocalization(model(kind, recovery_time=3.0), wrong,
                                       np.diag([1e-4, 1e-4, 1e-4]), 0.0)
-    run(recovering, simulated_events(3))
+    # one landmark per frame: no frame places the robot by itself (test_relocalization.py),
+    # the widening covariance alone must bring the observations back
+    run(recovering, [(t, event, data[:1] if event == "frame" else data)
+                     for t, event, data in simulated_events(3)])
     assert recovering.counts["recoveries"] >= 1 and recovering.counts["recovered"] >= 1
+    assert recovering.counts["relocalized"] == 0
     assert not recovering.lost
-    assert final_error(None, recovering, 3) < 0.15
+    # a quarter of the observations of the runs above: back near the robot, not as close
+    assert final_error(None, recovering, 3) < 0.4
 
 
 def test_unknown_ids_and_invalid_observations_are_counted_and_change_nothing():

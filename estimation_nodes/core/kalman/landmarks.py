@@ -16,7 +16,10 @@ covariance grows by ``recovery_std`` (in position and heading), and the gate
 judges the observation again from that; if it still does not fit, the
 covariance grows again after another ``recovery_time``, until observations pass.
 The gate stays on throughout, so a wrong identification (a landmark seen behind
-the robot) is rejected even while the filter recovers.
+the robot) is rejected even while the filter recovers. A frame of two landmarks or
+more is quicker than the widening: it places a lost filter by itself
+(relocalization.py), and so does a frame that comes recovery_time after the last
+used observation and fits nowhere.
 
 Odometry that reports commanded speeds, not measured ones, meets two facts of the
 robot it drives: the robot follows a command ``odometry_delay`` seconds after it is
@@ -41,7 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation_nodes.core.kalman import ekf, range_bearing, ukf
+from estimation_nodes.core.kalman import ekf, range_bearing, relocalization, ukf
 from estimation_nodes.core.kalman.ekf import Innovation
 from estimation_nodes.core.kalman.range_bearing import EUCLIDEAN, Ranging, SensorPose
 from estimation_nodes.core.kalman.unicycle import UnicycleNoise
@@ -253,9 +256,52 @@ class LandmarkLocalization:
             self._coming.append((now + self.model.odometry_delay, twist))
 
     def on_frame(self, t: float, observations: Iterable[Observation]) -> list[Outcome]:
-        """A camera frame at ``t``: predict to it, then apply each observation."""
+        """A camera frame at ``t``: predict to it, then apply each observation (a lost
+        filter first takes the pose the frame alone gives, where it gives one)."""
         self._predict_to(t)
+        observations = list(observations)
+        if self._lost() or (self._overdue() and not any(map(self._fits, observations))):
+            self._relocalize(observations)
         return [self._observe(observation) for observation in observations]
+
+    def _overdue(self) -> bool:
+        """Whether recovery_time passed since an observation was last used (a frame after
+        a long time unseen that fits nowhere is as lost as gated frames for that long)."""
+        return self.t is not None and self._last_used is not None \
+            and self.t - self._last_used >= self.model.recovery_time
+
+    def _fits(self, observation: Observation) -> bool:
+        """Whether ``observation`` is of a known landmark and passes the gate."""
+        landmark = self.model.landmarks.get(observation.landmark)
+        z = np.array([observation.range, observation.bearing], dtype=np.float64)
+        if landmark is None or not (np.isfinite(z).all() and z[0] > 0):
+            return False
+        try:
+            return bool(self._innovation(z, landmark).nis <= self._gate)
+        except (ValueError, np.linalg.LinAlgError):
+            return False
+
+    def _relocalize(self, observations: list[Observation]) -> None:
+        """The pose placed where a frame of two landmarks or more puts it
+        (relocalization.py), with recovery_std's spread around it; the range's scale and
+        its variance stay."""
+        model = self.model
+        sightings = [(model.landmarks[seen.landmark],
+                      np.array([seen.range, seen.bearing], dtype=np.float64))
+                     for seen in observations if seen.landmark in model.landmarks]
+        if not all(np.isfinite(z).all() and z[0] > 0 for _, z in sightings):
+            return
+        pose = relocalization.place(sightings, model.sensor, model.ranging, self.x[3:],
+                                    model.R, model.gate_probability)
+        if pose is None:
+            return
+        position, heading = model.recovery_std
+        P = self.P.copy()
+        P[:3, :], P[:, :3] = 0.0, 0.0
+        P[:3, :3] = np.diag([position ** 2, position ** 2, heading ** 2])
+        self.x, self.P = np.append(pose, self.x[3:]), P
+        self.counts["relocalized"] += 1
+        self._last_used, self._gated_since_used = self.t, 0
 
     def _predict_to(self, t: float) -> float:
         """The estimate predicted to ``t``; the filter's time after it (``t``, or a later
