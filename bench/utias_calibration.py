@@ -10,7 +10,9 @@ tuned to one. The ground truth (Vicon) is what each figure is measured against:
   centimetres is a bias the filter would otherwise carry into every pose), its
   reported range against the true distance and against the true depth (the distance
   along the camera's axis), the scale of the better one, the spread of what is left
-  (std = a + b * range), and the bearing's std;
+  (std = a + b * range), and the bearing's std; each robot's own scale and mount,
+  whose spread (range_scale_std, sensor_pose_std) is how well the pooled ones fit a
+  robot the figures never saw;
 - the odometry (commanded speeds): the delay after which the robot follows a
   command, the share of the commanded forward and turn speeds it drives, and the
   variance of a step's distance and turn (the filter's noise.* terms), fitted over
@@ -239,7 +241,21 @@ def calibrate(runs: Sequence[UtiasRun]) -> dict[str, object]:
         "odometry_delay": odometry["odometry_delay"],
         "odometry_scale": [odometry["forward_scale"], odometry["turn_scale"]],
         **{name: value for name, value in odometry.items() if name.startswith("noise.")},
+        **fleet_spread(runs),
     }
+
+
+def fleet_spread(runs: Sequence[UtiasRun]) -> dict[str, object]:
+    """How far one robot's camera is from the pooled calibration: the spread (sample
+    std) of each robot's own range scale and mount, as the filter's range_scale_std and
+    sensor_pose_std; nothing from fewer than two robots (no spread to measure)."""
+    if len(runs) < 2:
+        return {}
+    own = [camera_figures([run]) for run in runs]
+    scales = np.array([figures["range_scale"] for figures in own])
+    mounts = np.array([figures["sensor_pose"] for figures in own])
+    return {"range_scale_std": float(np.std(scales, ddof=1)),
+            "sensor_pose_std": [float(v) for v in np.std(mounts, axis=0, ddof=1)]}
 
 
 def main() -> None:

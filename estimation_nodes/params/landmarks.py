@@ -51,7 +51,8 @@ def landmark_model(values: Mapping[str, Any],
                          int(bounded("ekf.iterations", values["ekf.iterations"])),
                          bounded("odometry_delay", values["odometry_delay"]),
                          _pair("odometry_scale", values["odometry_scale"],
-                               "[forward, turn]"), scale_std)
+                               "[forward, turn]"), scale_std,
+                         _sensor_pose_std(values))
 
 
 def _pair(name: str, value: Any, shape: str = "[position, heading]") -> tuple[float, float]:
@@ -185,6 +186,13 @@ def build_landmark_robot_settings(values: Mapping[str, Any]) -> LandmarkRobotSet
         _robot("turn_rate", values["turn_rate"]), pose, _robot("duration", values["duration"]),
         bool(values["exit_when_done"]), bool(values["hold_until_matched"]),
         tuple(name for name in values["hold_for_nodes"] if name))
+
+
+def _sensor_pose_std(values: Mapping[str, Any]) -> tuple[float, float, float]:
+    std = [float(v) for v in as_list("sensor_pose_std", values["sensor_pose_std"])]
+    if len(std) != 3:
+        raise ValueError(f"sensor_pose_std: expected [x, y, yaw], got {std}")
+    return std[0], std[1], std[2]
 
 
 def _sensor_pose(values: Mapping[str, Any]) -> SensorPose:

@@ -397,6 +397,11 @@ LANDMARK_MODEL_SPECS = (
               type_name="double_array"),
     ParamSpec("sensor_pose", [0.0, 0.0, 0.0], "[x, y, yaw] of the camera on the robot (m, m, "
               "rad from the robot's heading)."),
+    ParamSpec("sensor_pose_std", [0.0, 0.0, 0.0], "[x, y, yaw] std of sensor_pose (m, m, "
+              "rad; each in [0, 1]): how well the mount is known, e.g. the spread of a "
+              "fleet's calibrations. The filter takes sensor_pose as exact; the published "
+              "covariance adds the pose error a mount error makes.",
+              type_name="double_array"),
     ParamSpec("gate_probability", 0.999, "An observation whose innovation lies outside this "
               "probability's Mahalanobis ellipse is counted and skipped (1: no gate).",
               min_value=0.5, max_value=1.0),

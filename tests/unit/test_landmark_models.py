@@ -68,6 +68,47 @@ def test_a_ranging_that_cannot_be_is_refused():
             Ranging("depth", scale)
 
 
+def test_the_mount_covariance_is_the_spread_a_mount_error_gives_the_robots_pose():
+    # The observations fix the sensor's pose; the robot's is sensor_pose behind it. Its
+    # Jacobian in the mount, numerically, against the written-out covariance.
+    from estimation_nodes.core.kalman.relocalization import robot_pose
+
+    rng = np.random.default_rng(9)
+    for _ in range(20):
+        x = np.array([*rng.normal(0, 2, 2), rng.uniform(-math.pi, math.pi)])
+        mount = rng.normal(0, 0.1, 3)
+        std = rng.uniform(0, 0.05, 3)
+        c, s = math.cos(x[2]), math.sin(x[2])
+        seen_from = (x[0] + c * mount[0] - s * mount[1], x[1] + s * mount[0] + c * mount[1],
+                     x[2] + mount[2])
+
+        columns = []
+        for i in range(3):
+            step = np.zeros(3)
+            step[i] = 1e-6
+            ahead = robot_pose(seen_from, SensorPose(*(mount + step)))
+            behind = robot_pose(seen_from, SensorPose(*(mount - step)))
+            columns.append(np.r_[ahead[:2] - behind[:2], wrap(ahead[2] - behind[2])] / 2e-6)
+        J = np.column_stack(columns)
+        expected = J @ np.diag(std ** 2) @ J.T
+        got = range_bearing.mount_covariance(x, SensorPose(*mount), tuple(std))
+        np.testing.assert_allclose(got, expected, atol=1e-10)
+
+
+def test_the_published_covariance_adds_the_mounts_and_the_filters_own_does_not():
+    exact = LandmarkLocalization(model(), [0.5, 0.2, 0.7], np.eye(3) * 0.01, 0.0)
+    np.testing.assert_array_equal(exact.pose_covariance, exact.P)
+    std = (0.02, 0.01, 0.006)
+    known = LandmarkLocalization(model(sensor_pose_std=std), [0.5, 0.2, 0.7],
+                                 np.eye(3) * 0.01, 0.0)
+    np.testing.assert_array_equal(known.P, exact.P)
+    np.testing.assert_allclose(known.pose_covariance - known.P,
+                               range_bearing.mount_covariance(known.x, SENSOR, std))
+    for bad in ((0.02, 0.01), (-0.01, 0.0, 0.0), (math.nan, 0.0, 0.0), (0.0, 0.0, 2.0)):
+        with pytest.raises(ValueError, match="sensor_pose_std"):
+            model(sensor_pose_std=bad)
+
+
 def _iterated(x, P, z, landmark, R, iterations):
     observed = ekf.innovation(x, P, z, landmark, SENSOR, R, DEPTH)
     x_next, P_next, _ = ekf.correct_iterated(x, P, observed, z, landmark, SENSOR, R, DEPTH,

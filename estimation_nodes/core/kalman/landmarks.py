@@ -91,6 +91,10 @@ class LandmarkModel:
     #: The std of the prior on the range's scale (mean ranging.scale); 0: the scale is
     #: ranging.scale, not estimated.
     range_scale_std: float = 0.0
+    #: The std of sensor_pose (x m, y m, yaw rad): how well the mount is known. The
+    #: filter takes the mount as exact; the published pose covariance adds what its error
+    #: makes (Schmidt's consider covariance, to first order: range_bearing.mount_covariance).
+    sensor_pose_std: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     @property
     def state_size(self) -> int:
@@ -134,6 +138,10 @@ class LandmarkModel:
         if not (math.isfinite(self.range_scale_std) and 0 <= self.range_scale_std <= 0.25):
             raise ValueError(f"range_scale_std: expected 0 <= std <= 0.25, got "
                              f"{self.range_scale_std!r}")
+        if len(self.sensor_pose_std) != 3 or not all(
+                math.isfinite(v) and 0 <= v <= 1 for v in self.sensor_pose_std):
+            raise ValueError(f"sensor_pose_std: expected [x, y, yaw] in [0, 1], got "
+                             f"{list(self.sensor_pose_std)}")
         if self.points is not None and self.points.n != self.state_size:
             raise ValueError(f"points: sigma points for a state of {self.points.n}, but the "
                              f"state has {self.state_size}")
@@ -218,8 +226,12 @@ class LandmarkLocalization:
 
     @property
     def pose_covariance(self) -> FloatArray:
-        """The pose's 3 x 3 block of the covariance."""
-        return self.P[:3, :3]
+        """The pose's 3 x 3 block of the covariance, with what the mount's uncertainty
+        adds (sensor_pose_std; nothing where the mount is exact)."""
+        if not any(self.model.sensor_pose_std):
+            return self.P[:3, :3]
+        return self.P[:3, :3] + range_bearing.mount_covariance(
+            self.x, self.model.sensor, self.model.sensor_pose_std)
 
     @property
     def range_scale(self) -> tuple[float, float]:

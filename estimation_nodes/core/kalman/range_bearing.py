@@ -49,6 +49,24 @@ class SensorPose:
                 raise ValueError(f"sensor_pose.{name}: expected a finite number, got {value!r}")
 
 
+def mount_covariance(x: FloatArray, sensor: SensorPose,
+                     std: tuple[float, float, float]) -> FloatArray:
+    """The robot pose's covariance that a mount known to ``std`` (x, y, yaw) adds, given
+    where the sensor is (first order): the sensor's pose is what the observations fix,
+    the robot's reference point is sensor_pose from it. A mount error (dx, dy, dyaw)
+    moves the pose by -R(theta) (dx, dy) + dR/dtheta (x, y) dyaw, and the heading by
+    -dyaw."""
+    c, s = math.cos(x[2]), math.sin(x[2])
+    # J = [[-c, s, u], [-s, -c, v], [0, 0, -1]]; J diag(std^2) J' written out (it is
+    # published after every event)
+    u, v = -s * sensor.x - c * sensor.y, c * sensor.x - s * sensor.y
+    along, across, turn = std[0] ** 2, std[1] ** 2, std[2] ** 2
+    xy = c * s * (along - across) + u * v * turn
+    return np.array([[c * c * along + s * s * across + u * u * turn, xy, -u * turn],
+                     [xy, s * s * along + c * c * across + v * v * turn, -v * turn],
+                     [-u * turn, -v * turn, turn]])
+
+
 RANGE_KINDS = ("euclidean", "depth")
 
 
