@@ -21,7 +21,9 @@ at 30 Hz (a simulated unicycle among the UTIAS landmarks) to ekf_localizer with 
 package's default models (those of the simulation); each
 published pose is paired by its stamp with the event that made it, and the time from
 the event's publication to the pose's arrival here is measured (DDS both ways
-included).
+included). The same events go first to bench/relay_node.py, which answers each with an
+empty pose at once: the least any rclpy node in the localizer's place could do, the
+baseline of the p99 ratio printed.
 """
 
 from __future__ import annotations
@@ -236,6 +238,41 @@ def replace_truth_start(run, initial: np.ndarray):
 
 
 def run_latency(args: argparse.Namespace, work: Path) -> None:
+    """The same events to a bare relay (bench/relay_node.py: the least any rclpy node in
+    the localizer's place could do) and then to ekf_localizer, side by side."""
+    run = read_run(args.dataset, 1)
+    landmarks_file = work / "landmarks.yaml"
+    landmarks_file.write_text("landmarks:\n" + "".join(
+        f"  - {{id: {key}, x: {x!r}, y: {y!r}}}\n" for key, (x, y) in run.landmarks.items()))
+    start = np.array([1.0, 0.0, 0.0])
+    env = confine_ros(89)
+    rows, p99 = [], {}
+    for target in ("relay", "ekf_localizer"):
+        if target == "relay":
+            process = subprocess.Popen([sys.executable, str(BENCH / "relay_node.py")],
+                                       env=env, stdout=(work / "relay.log").open("w"),
+                                       stderr=subprocess.STDOUT)
+        else:
+            # the simulated frames are euclidean ranges of commands driven at once: the
+            # package's defaults
+            process = start_localizer(work, args.filter, start, landmarks_file, env,
+                                      params=None)
+        for kind, count, latencies in _latencies(args, run, start, process):
+            p50, p99[target, kind] = np.percentile(latencies, [50, 99])
+            ratio = "-" if target == "relay" else \
+                f"{p99[target, kind] / p99['relay', kind]:.2f}"
+            rows.append([target, kind, f"{count}", f"{latencies.size}", f"{p50:.2f}",
+                         f"{p99[target, kind]:.2f}", f"{latencies.max():.2f}", ratio])
+    print(f"ekf_localizer ({args.filter.upper()}): odometry at {ODOM_HZ:g} Hz, frames at "
+          f"{FRAME_HZ:g} Hz for {args.seconds:g} s each; event published -> pose received")
+    print(table(["answered by", "event", "sent", "poses paired", "p50 ms", "p99 ms",
+                 "max ms", "p99 / relay's"], rows))
+
+
+def _latencies(args: argparse.Namespace, run, start: np.ndarray,
+               process: subprocess.Popen) -> list[tuple[str, int, np.ndarray]]:
+    """Odometry at ODOM_HZ and frames at FRAME_HZ to ``process`` for args.seconds: per
+    kind of event, how many were sent and the latencies (ms) of the poses paired."""
     import rclpy
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import PointCloud2
@@ -246,14 +283,6 @@ def run_latency(args: argparse.Namespace, work: Path) -> None:
     from estimation_nodes.nodes.landmark_messages import landmark_cloud
     from estimation_nodes.nodes.stamps import set_stamp
 
-    run = read_run(args.dataset, 1)
-    landmarks_file = work / "landmarks.yaml"
-    landmarks_file.write_text("landmarks:\n" + "".join(
-        f"  - {{id: {key}, x: {x!r}, y: {y!r}}}\n" for key, (x, y) in run.landmarks.items()))
-    start = np.array([1.0, 0.0, 0.0])
-    env = confine_ros(89)
-    # the simulated frames are euclidean ranges of commands driven at once: the defaults
-    localizer = start_localizer(work, args.filter, start, landmarks_file, env, params=None)
     rclpy.init()
     watcher = PoseWatcher()
     odom_pub = watcher.node.create_publisher(Odometry, "odom", 100)
@@ -295,19 +324,14 @@ def run_latency(args: argparse.Namespace, work: Path) -> None:
         timer.cancel()
         watcher.spin(lambda: False, 2.0)
     finally:
-        end_run(None, localizer, watcher.node)
-    rows = []
+        end_run(None, process, watcher.node)
+    measured = []
     for kind in ("odom", "frame"):
         latencies = np.array([1e3 * (watcher.poses[s][2] - at) for s, (k, at) in sent.items()
                               if k == kind and s in watcher.poses])
-        count = sum(1 for k, _ in sent.values() if k == kind)
         if latencies.size:
-            p50, p99 = np.percentile(latencies, [50, 99])
-            rows.append([kind, f"{count}", f"{latencies.size}", f"{p50:.2f}", f"{p99:.2f}",
-                         f"{latencies.max():.2f}"])
-    print(f"ekf_localizer ({args.filter.upper()}): odometry at {ODOM_HZ:g} Hz, frames at "
-          f"{FRAME_HZ:g} Hz for {args.seconds:g} s; event published -> pose received")
-    print(table(["event", "sent", "poses paired", "p50 ms", "p99 ms", "max ms"], rows))
+            measured.append((kind, sum(1 for k, _ in sent.values() if k == kind), latencies))
+    return measured
 
 
 def main() -> None:

@@ -4,12 +4,17 @@ It subscribes to ``tile_observation`` and publishes the same String on
 ``relay_out`` (and ``kalman_measurement`` to ``relay_vector_out``, for the
 matrix filter's path), with the estimator's own QoS on both sides, so a
 benchmark can compare the estimator with the least any rclpy node in its place
-could do.
+could do. For ekf_localizer's place (bench/ekf_node.py latency): every ``odom`` and
+``landmark_observations`` message is answered on ``pose`` by an empty
+PoseWithCovarianceStamped with the event's header, the localizer's QoS on both sides.
 """
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from geometry_msgs.msg import PoseWithCovarianceStamped
+from nav_msgs.msg import Odometry
+from sensor_msgs.msg import PointCloud2
 from std_msgs.msg import Float64MultiArray, String
 
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
@@ -24,6 +29,15 @@ class Relay(Node):
             Float64MultiArray, "relay_vector_out", latched_qos(1000))
         self.create_subscription(Float64MultiArray, "kalman_measurement",
                                  self._vector_pub.publish, INPUT_QOS)
+        self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, "pose",
+                                               latched_qos(1))
+        self.create_subscription(Odometry, "odom", self._answer, INPUT_QOS)
+        self.create_subscription(PointCloud2, "landmark_observations", self._answer, INPUT_QOS)
+
+    def _answer(self, event) -> None:
+        pose = PoseWithCovarianceStamped()
+        pose.header = event.header
+        self._pose_pub.publish(pose)
 
 
 def main() -> None:

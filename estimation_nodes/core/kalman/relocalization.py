@@ -94,6 +94,8 @@ def place(sightings: Sequence[Sighting], sensor: SensorPose, ranging: Ranging,
     if len(sightings) < 2 or len(set(landmarks)) < len(landmarks):
         return None
     scale = range_bearing.range_scale(np.append(np.zeros(3), rest_of_state), ranging)
+    if not (math.isfinite(scale) and scale > 0):
+        return None
     pairs = []
     for landmark, z in sightings:
         point = sensor_point(z, ranging, scale)
