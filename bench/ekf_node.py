@@ -259,8 +259,8 @@ def run_latency(args: argparse.Namespace, work: Path) -> None:
                                       params=None)
         for kind, count, latencies in _latencies(args, run, start, process):
             p50, p99[target, kind] = np.percentile(latencies, [50, 99])
-            ratio = "-" if target == "relay" else \
-                f"{p99[target, kind] / p99['relay', kind]:.2f}"
+            ratio = f"{p99[target, kind] / p99['relay', kind]:.2f}" \
+                if target != "relay" and ("relay", kind) in p99 else "-"
             rows.append([target, kind, f"{count}", f"{latencies.size}", f"{p50:.2f}",
                          f"{p99[target, kind]:.2f}", f"{latencies.max():.2f}", ratio])
     print(f"ekf_localizer ({args.filter.upper()}): odometry at {ODOM_HZ:g} Hz, frames at "

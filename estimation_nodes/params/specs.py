@@ -406,7 +406,9 @@ LANDMARK_MODEL_SPECS = (
               "probability's Mahalanobis ellipse is counted and skipped (1: no gate).",
               min_value=0.5, max_value=1.0),
     ParamSpec("recovery_time", 5.0, "After this many seconds with every observation gated, "
-              "the covariance grows by recovery_std and the gate judges again.",
+              "the filter is lost: a frame of two landmarks or more that fit one pose "
+              "places it there; else the covariance grows by recovery_std and the gate "
+              "judges again.",
               min_value=0.01, max_value=3600.0),
     ParamSpec("recovery_std", [1.0, 0.5], "[position (m), heading (rad)]: the std a recovery "
               "adds to the covariance (the filter admits it no longer knows where it is).",

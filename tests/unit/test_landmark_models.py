@@ -189,6 +189,27 @@ def test_the_iterated_ekf_never_ends_where_the_posterior_is_worse_than_one_pass(
     assert kept > 30 and fell_back > 0, (kept, fell_back)
 
 
+def test_an_iterate_on_the_landmark_leaves_the_single_pass(monkeypatch):
+    x, P = np.array([0.0, 0.0, 0.2]), np.diag([0.04, 0.04, 0.05])
+    R = np.diag([0.05 ** 2, 0.02 ** 2])
+    z, landmark = np.array([2.5, 0.3]), (3.0, 1.0)
+    observed = ekf.innovation(x, P, z, landmark, SENSOR, R, DEPTH)
+    single = ekf.correct(x, P, observed, R)
+    real = ekf.innovation
+
+    def on_the_landmark(at, *args):
+        if not np.array_equal(at, x):
+            raise ValueError("landmark: at 0 m from the sensor, its bearing is undefined")
+        return real(at, *args)
+
+    monkeypatch.setattr(ekf, "innovation", on_the_landmark)
+    x_next, P_next, searched = ekf.correct_iterated(x, P, observed, z, landmark, SENSOR, R,
+                                                    DEPTH, 10)
+    assert not searched
+    np.testing.assert_array_equal(x_next, single[0])
+    np.testing.assert_array_equal(P_next, single[1])
+
+
 def test_a_correction_that_fails_is_an_unstable_observation_not_an_error(monkeypatch):
     # An iterate may land on the landmark itself, where its bearing is undefined.
     def on_the_landmark(*_args, **_kwargs):

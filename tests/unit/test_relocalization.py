@@ -35,6 +35,11 @@ def sightings(pose, ranging, ids=LANDMARKS, rng=None):
     return seen
 
 
+def place(sightings, ranging, scale_variance=0.0):
+    return relocalization.place(sightings, SENSOR, ranging, np.array([ranging.scale]),
+                                np.array([[scale_variance]]), R, 0.999)
+
+
 @pytest.mark.parametrize("ranging", [EUCLIDEAN, DEPTH], ids=["distance", "depth"])
 def test_two_landmarks_or_more_give_the_exact_pose_where_the_frame_is_exact(ranging):
     rng = np.random.default_rng(3)
@@ -42,28 +47,32 @@ def test_two_landmarks_or_more_give_the_exact_pose_where_the_frame_is_exact(rang
     for _ in range(200):
         pose = np.array([*rng.uniform(-1, 1.5, 2), rng.uniform(-math.pi, math.pi)])
         seen = sightings(pose, ranging)
-        found = relocalization.place([(LANDMARKS[k], z) for k, z in seen], SENSOR, ranging,
-                                     np.array([ranging.scale]), R, 0.999)
+        found = place([(LANDMARKS[k], z) for k, z in seen], ranging)
         if len(seen) < 2:
             assert found is None
             continue
         placed += 1
-        np.testing.assert_allclose(found[:2], pose[:2], atol=1e-9)
-        assert abs(wrap(found[2] - pose[2])) < 1e-9
+        np.testing.assert_allclose(found[0][:2], pose[:2], atol=1e-9)
+        assert abs(wrap(found[0][2] - pose[2])) < 1e-9
+        assert np.all(np.linalg.eigvalsh(found[1]) > 0)
     assert placed > 50
 
 
-def test_a_noisy_frame_places_the_robot_near_its_pose():
+def test_a_noisy_frame_places_the_robot_near_its_pose_with_the_covariance_of_its_error():
     rng = np.random.default_rng(4)
-    errors = []
-    for _ in range(200):
+    errors, nees = [], []
+    for _ in range(400):
         pose = np.array([*rng.uniform(-1, 1.5, 2), rng.uniform(-math.pi, math.pi)])
         seen = sightings(pose, DEPTH, rng=rng)
-        found = relocalization.place([(LANDMARKS[k], z) for k, z in seen], SENSOR, DEPTH,
-                                     np.array([DEPTH.scale]), R, 0.999)
+        found = place([(LANDMARKS[k], z) for k, z in seen], DEPTH)
         if len(seen) >= 3 and found is not None:
-            errors.append(np.hypot(*(found[:2] - pose[:2])))
-    assert len(errors) > 30 and np.median(errors) < 0.1
+            error = found[0] - pose
+            error[2] = wrap(error[2])
+            errors.append(np.hypot(error[0], error[1]))
+            nees.append(error @ np.linalg.solve(found[1], error))
+    assert len(errors) > 60 and np.median(errors) < 0.1
+    # the normalized error of a 3-dof pose averages 3 where the covariance is its spread
+    assert 2.0 < np.mean(nees) < 4.5, np.mean(nees)
 
 
 def test_a_frame_that_cannot_place_the_robot_places_nothing():
@@ -73,10 +82,10 @@ def test_a_frame_that_cannot_place_the_robot_places_nothing():
     one = [(LANDMARKS[1], seen[1])]
     twice = [(LANDMARKS[1], seen[1]), (LANDMARKS[1], seen[1])]
     for frame in (one, twice, []):
-        assert relocalization.place(frame, SENSOR, DEPTH, np.array([1.03]), R, 0.999) is None
+        assert place(frame, DEPTH) is None
     # a misidentified landmark: the frame's points are not where the map has them
     swapped = [(LANDMARKS[2] if key == 1 else LANDMARKS[key], z) for key, z in seen.items()]
-    assert relocalization.place(swapped, SENSOR, DEPTH, np.array([1.03]), R, 0.999) is None
+    assert place(swapped, DEPTH) is None
 
 
 @pytest.mark.parametrize("dof, exact", [(1, 10.828), (3, 16.266), (9, 27.877)])
@@ -133,3 +142,39 @@ def test_frames_of_one_landmark_leave_the_recovery_to_the_widening():
         else:
             localization.on_frame(t, data)
     assert localization.counts["relocalized"] == 0 and localization.counts["recoveries"] >= 1
+
+
+@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+def test_the_frame_that_places_the_robot_is_not_applied_again(kind):
+    # the placed pose and covariance are the frame's information: applied once
+    pose = np.array([0.3, -0.2, 0.5])
+    localization = LandmarkLocalization(model(kind), (-1.5, 1.2, 2.6),
+                                        np.diag([1e-4, 1e-4, 1e-4]), 0.0)
+    frame = [Observation(k, *z) for k, z in sightings(pose, DEPTH, rng=np.random.default_rng(6))]
+    outcomes = localization.on_frame(3.0, frame)      # after recovery_time unused
+    found = relocalization.place([(LANDMARKS[o.landmark], np.array([o.range, o.bearing]))
+                                  for o in frame], SENSOR, DEPTH, np.zeros(0),
+                                 np.zeros((0, 0)), R, 0.999)
+    assert found is not None and localization.counts["relocalized"] == 1
+    np.testing.assert_array_equal(localization.pose, found[0])
+    np.testing.assert_array_equal(localization.pose_covariance, found[1])
+    assert [o.verdict for o in outcomes] == ["used"] * len(frame)
+
+
+def test_what_cannot_place_is_left_out_and_the_rest_places():
+    pose = np.array([-1.0, 0.0, 0.0])             # four landmarks in view
+    good = [Observation(k, *z) for k, z in sightings(pose, DEPTH)]
+    assert len(good) >= 4
+    bad = [Observation(good[0].landmark, 9.0, 0.1),      # an id twice: both copies out
+           Observation(99, 2.0, 0.1),                     # not on the map
+           Observation(good[1].landmark, math.nan, 0.0)]  # no range, and an id twice
+    localization = LandmarkLocalization(model("ekf"), (-1.5, 1.2, 2.6),
+                                        np.diag([1e-4, 1e-4, 1e-4]), 0.0)
+    outcomes = localization.on_frame(3.0, good + bad)
+    assert localization.counts["relocalized"] == 1
+    # placed by good[2:] alone, exact frames: exactly where the robot is
+    assert np.hypot(*(localization.pose[:2] - pose[:2])) < 1e-9
+    assert [o.verdict for o in outcomes[2:len(good)]] == ["used"] * (len(good) - 2)
+    assert outcomes[len(good) + 1].verdict == "unknown"
+    assert outcomes[len(good) + 2].verdict == "invalid"
+    assert len(outcomes) == len(good) + len(bad)

@@ -9,8 +9,10 @@ which stays symmetric and positive semi-definite whatever the rounding.
 
 The iterated EKF (Bell and Cathey 1993) linearizes the measurement again at the
 estimate the last pass gave, x_i+1 = x + K_i (z - h(x_i) - H_i (x - x_i)), until the
-step is below ``ITERATION_STEP``: a Gauss-Newton search of the posterior's mode. One
-pass is the plain EKF. It matters after a long time unobserved, when the heading is
+step is below ``ITERATION_STEP``: a Gauss-Newton search of the posterior's mode, kept
+where it converged to a lower posterior cost than the first pass's (else the first
+pass is the answer: from a very wide prior the search can leap metres). One pass is
+the plain EKF. It matters after a long time unobserved, when the heading is
 tens of degrees uncertain and a landmark's bearing, linearized there, would move the
 estimate along a tangent far from the arc the measurement allows.
 A state of four entries carries the range's scale as well (range_bearing.py): the
@@ -171,7 +173,11 @@ def correct_iterated(x: FloatArray, P: FloatArray, observed: Innovation, z: Floa
     last, converged = observed, False
     for _ in range(iterations - 1):
         at = x_next
-        here = innovation(at, P, z, landmark, sensor, R, ranging)
+        try:
+            here = innovation(at, P, z, landmark, sensor, R, ranging)
+        except ValueError:
+            # an iterate on the landmark itself, where it has no bearing
+            return (*single, False)
         assert here.H is not None
         # linearized at ``at``, applied from x: y = z - h(at) - H (x - at)
         offset = x - at

@@ -269,12 +269,15 @@ class LandmarkLocalization:
 
     def on_frame(self, t: float, observations: Iterable[Observation]) -> list[Outcome]:
         """A camera frame at ``t``: predict to it, then apply each observation (a lost
-        filter first takes the pose the frame alone gives, where it gives one)."""
+        filter is placed by the frame alone first, where it can be: the observations that
+        placed it are used for that)."""
         self._predict_to(t)
         observations = list(observations)
+        placed: list[Outcome] = []
         if self._lost() or (self._overdue() and not any(map(self._fits, observations))):
-            self._relocalize(observations)
-        return [self._observe(observation) for observation in observations]
+            placed = self._relocalize(observations)
+        placing = {id(outcome.observation): outcome for outcome in placed}
+        return [placing.get(id(seen)) or self._observe(seen) for seen in observations]
 
     def _overdue(self) -> bool:
         """Whether recovery_time passed since an observation was last used (a frame after
@@ -293,27 +296,30 @@ class LandmarkLocalization:
         except (ValueError, np.linalg.LinAlgError):
             return False
 
-    def _relocalize(self, observations: list[Observation]) -> None:
-        """The pose placed where a frame of two landmarks or more puts it
-        (relocalization.py), with recovery_std's spread around it; the range's scale and
-        its variance stay."""
+    def _relocalize(self, observations: list[Observation]) -> list[Outcome]:
+        """The pose and covariance one frame gives (relocalization.py), from its usable
+        observations of landmarks it sees once; the range's scale and its variance stay.
+        The outcomes of the observations that placed it (none where it was not placed)."""
         model = self.model
-        sightings = [(model.landmarks[seen.landmark],
-                      np.array([seen.range, seen.bearing], dtype=np.float64))
-                     for seen in observations if seen.landmark in model.landmarks]
-        if not all(np.isfinite(z).all() and z[0] > 0 for _, z in sightings):
-            return
-        pose = relocalization.place(sightings, model.sensor, model.ranging, self.x[3:],
-                                    model.R, model.gate_probability)
-        if pose is None:
-            return
-        position, heading = model.recovery_std
+        ids = Counter(seen.landmark for seen in observations)
+        placing = [(seen, np.array([seen.range, seen.bearing], dtype=np.float64))
+                   for seen in observations
+                   if seen.landmark in model.landmarks and ids[seen.landmark] == 1]
+        placing = [(seen, z) for seen, z in placing if relocalization.usable(z, model.ranging)]
+        placed = relocalization.place(
+            [(model.landmarks[seen.landmark], z) for seen, z in placing], model.sensor,
+            model.ranging, self.x[3:], self.P[3:, 3:], model.R, model.gate_probability)
+        if placed is None:
+            return []
+        pose, covariance = placed
         P = self.P.copy()
         P[:3, :], P[:, :3] = 0.0, 0.0
-        P[:3, :3] = np.diag([position ** 2, position ** 2, heading ** 2])
+        P[:3, :3] = covariance
         self.x, self.P = np.append(pose, self.x[3:]), P
         self.counts["relocalized"] += 1
+        self.counts["used"] += len(placing)
         self._last_used, self._gated_since_used = self.t, 0
+        return [Outcome(seen, "used") for seen, _ in placing]
 
     def _predict_to(self, t: float) -> float:
         """The estimate predicted to ``t``; the filter's time after it (``t``, or a later

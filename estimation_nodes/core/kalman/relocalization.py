@@ -10,16 +10,23 @@ and the same landmarks on the map, are one set of points seen from two frames; t
 motion between them (least squares, the 2-D Kabsch solution) is the sensor's pose on the
 map, and the mount gives the robot's.
 
-The pose is taken only where every observation of the frame fits it: the sum of their
-squared residuals, each over its own noise, within the gate's probability of chi-square
-with 2k - 3 degrees of freedom (2 per observation, less the pose's 3). A misidentified
-landmark puts the frame's points at distances the map does not have, and seeds nothing.
+That fit weighs every point alike; a few Gauss-Newton steps then weigh each range
+and bearing by its noise (R, with what the range's estimated scale still leaves
+uncertain), and the frame's own information, (J' W J)^-1 at that pose, is the
+covariance the filter restarts with: the frame is used once, for the placing. The pose
+is taken only where every observation of the frame fits it: the sum of their squared
+residuals, each over its own noise, within the gate's probability of chi-square with
+2k - 3 degrees of freedom (2 per observation, less the pose's 3). A misidentified
+landmark puts the frame's points at distances the map does not have, and seeds
+nothing. The caller leaves out what cannot place (an unknown id, an id seen twice, a
+range that is not a positive number, a depth too far off the axis: ``usable``).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
+from typing import cast
 from statistics import NormalDist
 
 import numpy as np
@@ -32,6 +39,10 @@ from estimation_nodes.core.validation import FloatArray
 #: A depth camera's landmark farther than this off its axis (rad) gives no place: the
 #: distance depth / cos(bearing) grows without bound towards 90 degrees.
 MAX_DEPTH_BEARING = math.radians(80)
+
+#: Gauss-Newton steps from the unweighted fit to the weighted one (each a 3 x 3 solve;
+#: from the fit's start they settle in two or three).
+REFINE_STEPS = 5
 
 #: A landmark seen in the frame: where it is on the map, and (range, bearing) measured.
 Sighting = tuple[tuple[float, float], FloatArray]
@@ -83,12 +94,20 @@ def robot_pose(sensor_on_map: tuple[float, float, float], sensor: SensorPose) ->
                      heading])
 
 
+def usable(z: FloatArray, ranging: Ranging) -> bool:
+    """Whether a measured (range, bearing) can help place the robot."""
+    return bool(np.isfinite(z).all() and z[0] > 0
+                and (ranging.kind != "depth" or abs(z[1]) <= MAX_DEPTH_BEARING))
+
+
 def place(sightings: Sequence[Sighting], sensor: SensorPose, ranging: Ranging,
-          rest_of_state: FloatArray, noise: Callable[[float], FloatArray],
-          probability: float) -> FloatArray | None:
-    """The robot's pose from one frame's ``sightings`` of distinct landmarks, where they
-    fit it (see the module's text); None where the frame cannot place the robot.
-    ``rest_of_state`` (the range's scale, where it is estimated) and ``noise`` (R of a
+          rest_of_state: FloatArray, rest_covariance: FloatArray,
+          noise: Callable[[float], FloatArray],
+          probability: float) -> tuple[FloatArray, FloatArray] | None:
+    """The robot's pose and its covariance from one frame's ``sightings`` of distinct
+    landmarks (each ``usable``), where they fit it (see the module's text); None where
+    the frame cannot place the robot. ``rest_of_state`` and ``rest_covariance`` (the
+    range's scale and its variance, where it is estimated) and ``noise`` (R of a
     measured range) are the filter's."""
     landmarks = [landmark for landmark, _ in sightings]
     if len(sightings) < 2 or len(set(landmarks)) < len(landmarks):
@@ -103,11 +122,37 @@ def place(sightings: Sequence[Sighting], sensor: SensorPose, ranging: Ranging,
             return None
         pairs.append((landmark, point))
     pose = robot_pose(sensor_pose_on_map(pairs), sensor)
-    state = np.append(pose, rest_of_state)
-    misfit = 0.0
-    for landmark, z in sightings:
-        y = range_bearing.residual(z, range_bearing.expected(state, landmark, sensor, ranging))
-        misfit += float(y @ np.linalg.solve(noise(float(z[0])), y))
-    if not misfit <= chi_square_quantile(2 * len(sightings) - 3, probability):
+    try:
+        for _ in range(REFINE_STEPS):
+            step, information, misfit = _weighted_step(pose, sightings, sensor, ranging,
+                                                       rest_of_state, rest_covariance, noise)
+            pose = pose + step
+            pose[2] = wrap(pose[2])
+        _, information, misfit = _weighted_step(pose, sightings, sensor, ranging,
+                                                rest_of_state, rest_covariance, noise)
+        covariance = np.linalg.inv(information)
+    except (ValueError, np.linalg.LinAlgError):
+        # an iterate on a landmark, or landmarks in one place (no heading from them)
         return None
-    return pose
+    if not (misfit <= chi_square_quantile(2 * len(sightings) - 3, probability)
+            and np.isfinite(pose).all() and np.isfinite(covariance).all()):
+        return None
+    return pose, 0.5 * (covariance + covariance.T)
+
+
+def _weighted_step(pose: FloatArray, sightings: Sequence[Sighting], sensor: SensorPose,
+                   ranging: Ranging, rest_of_state: FloatArray, rest_covariance: FloatArray,
+                   noise: Callable[[float], FloatArray]) -> tuple[FloatArray, FloatArray, float]:
+    """One Gauss-Newton step of the weighted fit at ``pose``; J' W J there; and the sum of
+    the squared residuals over their noise (the scale's variance in the range's)."""
+    state = np.append(pose, rest_of_state)
+    information, gradient, misfit = np.zeros((3, 3)), np.zeros(3), 0.0
+    for landmark, z in sightings:
+        H = range_bearing.jacobian(state, landmark, sensor, ranging)
+        J, rest = H[:, :3], H[:, 3:]
+        W = np.linalg.inv(noise(float(z[0])) + rest @ rest_covariance @ rest.T)
+        y = range_bearing.residual(z, range_bearing.expected(state, landmark, sensor, ranging))
+        information += J.T @ W @ J
+        gradient += J.T @ W @ y
+        misfit += float(y @ W @ y)
+    return cast(FloatArray, np.linalg.solve(information, gradient)), information, misfit
