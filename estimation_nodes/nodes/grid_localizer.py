@@ -11,7 +11,9 @@ state grid: RViz's Map display and Foxglove's 3D panel draw it) and
 quality first. Bad messages are dropped and counted, never a NaN belief.
 
 A scan waits up to ``odom_wait`` for the odometry of its time and is dropped
-if it does not come; a scan that comes while another waits supersedes it.
+if it does not come; scans that come while others wait queue behind them (up to
+WAITING_SCANS, the oldest superseded beyond) and are taken in order as their
+odometry comes.
 Each published pose carries the stamp of what made it: its scan's time, the
 initial pose's, or the time of a start or reset (uniform belief). So a
 replay of a recorded run (tools/replay/grid_localizer.py) takes exactly the
@@ -69,6 +71,11 @@ from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS
 #: used with an older odometry pose, its update would depend on when messages arrived,
 #: and no replay of the recorded run could make it again.
 SCAN_WAIT_CHECK_S = 0.05
+#: Scans kept waiting for the odometry of their times, oldest first. A real log's
+#: scans come in pairs 0.05 s apart where its odometry comes 0.9 s late: one slot lost
+#: the first of each pair (4 of Intel's 889 updates at its own rate). Bounded, so late
+#: odometry cannot queue more catching up than a second of a 10 Hz laser.
+WAITING_SCANS = 10
 #: Odometry messages queued for the localizer: 20 s at 10 Hz, 4 s at 50 Hz, so an update
 #: that keeps it busy loses none (a lost one would move the next update's prediction).
 ODOM_DEPTH = ODOMETRY_HISTORY
@@ -119,8 +126,8 @@ class GridLocalizer(Node):
         self.create_service(Trigger, "~/global_localization", self._on_global_localization)
         self.create_service(Trigger, "~/reset", self._on_reset)
         self.create_timer(self._settings.diagnostics_period, self._publish_diagnostics)
-        #: A scan waiting for the odometry of its time: (message, stamp ns, deadline).
-        self._waiting_scan: tuple[LaserScan, int | None, float] | None = None
+        #: Scans waiting for the odometry of their times: (message, stamp ns, deadline).
+        self._waiting_scans: deque[tuple[LaserScan, int, float]] = deque()
         self.create_timer(min(SCAN_WAIT_CHECK_S, self._settings.odom_wait / 4),
                           self._scan_waited_out)
 
@@ -165,15 +172,20 @@ class GridLocalizer(Node):
             self.handled["odom_repeated_stamp"] += 1
             return
         self.handled["odom"] += 1
-        waiting = self._waiting_scan
-        if waiting is not None and self.localization.odometry_covers(waiting[1] or 0):
-            self._waiting_scan = None
-            self._use_scan(waiting[0], waiting[1])
+        self._use_waiting_scans()
+
+    def _use_waiting_scans(self) -> None:
+        """The waiting scans whose odometry came, in order."""
+        waiting = self._waiting_scans
+        while waiting and self.localization is not None \
+                and self.localization.odometry_covers(waiting[0][1]):
+            msg, stamp, _ = waiting.popleft()
+            self._use_scan(msg, stamp)
 
     def _scan_waited_out(self) -> None:
-        waiting = self._waiting_scan
-        if waiting is not None and time.monotonic() > waiting[2]:
-            self._waiting_scan = None
+        waiting = self._waiting_scans
+        while waiting and time.monotonic() > waiting[0][2]:
+            waiting.popleft()
             self._reject("scan_without_odometry", f"scan dropped: no odometry of its time "
                          f"came within odom_wait ({self._settings.odom_wait:g} s)")
 
@@ -187,12 +199,17 @@ class GridLocalizer(Node):
             return
         stamp = stamp_or_none(msg.header.stamp)
         self.scan_gaps.note(stamp, msg.scan_time)
-        if stamp is not None and not self.localization.odometry_covers(stamp):
+        if stamp is not None and (self._waiting_scans
+                                  or not self.localization.odometry_covers(stamp)):
             # The odometry of the scan's time is still on its way (another topic): wait for
-            # it, so the update does not depend on which came first.
-            if self._waiting_scan is not None:
+            # it, so the update does not depend on which came first; behind older scans
+            # that wait, to keep their order.
+            if len(self._waiting_scans) == WAITING_SCANS:
+                self._waiting_scans.popleft()
                 self.handled["scan_superseded"] += 1
-            self._waiting_scan = (msg, stamp, time.monotonic() + self._settings.odom_wait)
+            self._waiting_scans.append((msg, stamp,
+                                        time.monotonic() + self._settings.odom_wait))
+            self._use_waiting_scans()
             return
         self._use_scan(msg, stamp)
 

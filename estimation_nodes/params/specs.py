@@ -293,8 +293,9 @@ GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
               "dropped, counted, and the odometry followed from the new pose.",
               read_only=True, min_value=0.01, max_value=1000.0),
     ParamSpec("odom_wait", 1.0, "Seconds a scan waits for the odometry of its time (as "
-              "tf's message filter waits for a transform), then dropped and counted. More "
-              "than the odometry's period: a real log's comes at 2 Hz in places.",
+              "tf's message filter waits for a transform), then dropped and counted; scans "
+              "that come meanwhile wait behind it, in order (10 at most). More than the "
+              "odometry's period: a real log's comes at 2 Hz in places.",
               read_only=True, min_value=0.01, max_value=60.0),
     ParamSpec("quality_radius", 0.3, "localization_quality: the belief's probability within "
               "this distance (m) of the published pose ...", read_only=True, min_value=0.0,

@@ -24,6 +24,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
 from estimation_nodes.core.sim import planar
+from estimation_nodes.nodes import grid_localizer
 from estimation_nodes.nodes.grid_localizer import GridLocalizer
 from estimation_nodes.nodes.grid_messages import fill_pose
 from estimation_nodes.nodes.qos import latched_qos
@@ -94,8 +95,8 @@ class Driver:
         msg.ranges = planar.ray_cast(self.world, pose(step), self.angles, 12.0).tolist()
         outcome = {"updates": self.counted("scan"),
                    "is not due": self.counted("scan_without_motion"),
-                   "waits": lambda: self.localizer._waiting_scan is not None
-                   and self.localizer._waiting_scan[1] == stamp(step),
+                   "waits": lambda: bool(self.localizer._waiting_scans)
+                   and self.localizer._waiting_scans[-1][1] == stamp(step),
                    "supersedes": self.counted("scan_superseded")}[then]
         self.send("/scan", msg)
         self.wait(outcome, f"say scan {step} {then}")
@@ -112,7 +113,9 @@ def pose(step: int) -> tuple[float, float, float]:
 
 @pytest.mark.timeout(120)
 def test_a_run_in_which_the_localizer_left_scans_out_replays_equal(context, executor,
-                                                                  tmp_path, capsys):
+                                                                  tmp_path, capsys,
+                                                                  monkeypatch):
+    monkeypatch.setattr(grid_localizer, "WAITING_SCANS", 2)
     localizer = GridLocalizer(context=context, parameter_overrides=params(
         map_file=str(CORRIDOR), heading_bins=8))
     executor.add_node(localizer)
@@ -132,13 +135,15 @@ def test_a_run_in_which_the_localizer_left_scans_out_replays_equal(context, exec
         driver.odom(3)
         driver.scan(3, "is not due")
         driver.scan(4, "waits")                    # due (0.4 m), but ...
-        driver.scan(5, "supersedes")               # ... superseded while it waits
-        driver.odom(4)
+        driver.scan(5, "waits")                    # (behind it)
+        driver.scan(6, "supersedes")               # ... left out: 2 scans wait here
         updated = driver.counted("scan")
+        driver.odom(4)
         driver.odom(5)
         driver.wait(updated, "update with scan 5")
+        not_due = driver.counted("scan_without_motion")
         driver.odom(6)
-        driver.scan(6, "is not due")
+        driver.wait(not_due, "find scan 6 not due once its odometry came")
         driver.scan(7, "waits")                    # due, and its odometry comes too late
         driver.wait(driver.counted("scan_without_odometry", "rejected"),
                     "drop scan 7 after odom_wait")
