@@ -131,16 +131,23 @@ def test_a_repeated_odometry_stamp_is_counted_and_the_first_pose_kept(nodes, exe
     assert localizer.localization._odometry_at(7 * 10**9) == pytest.approx((1.0, 0.0, 0.0))
 
 
-def test_a_scan_waits_odom_wait_for_the_odometry_of_its_time(nodes, executor,
-                                                            collector_factory):
-    """A real log's odometry comes at 2 Hz in places: a scan whose odometry comes 0.5 s
-    after it is answered with the default odom_wait (1 s)."""
+def corridor_localizer_with_driver(nodes, executor, collector_factory):
+    """A localizer on the corridor, and odometry and laser publishers it hears."""
     localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=8)
     driver = collector_factory({"pose": PoseWithCovarianceStamped}, name="driver")
     wheels = driver.node.create_publisher(Odometry, "odom", 10)
     laser = driver.node.create_publisher(LaserScan, "scan", 10)
     assert spin_until(executor, lambda: wheels.get_subscription_count() > 0
                       and laser.get_subscription_count() > 0, 10.0)
+    return localizer, wheels, laser
+
+
+def test_a_scan_waits_odom_wait_for_the_odometry_of_its_time(nodes, executor,
+                                                            collector_factory):
+    """A real log's odometry comes at 2 Hz in places: a scan whose odometry comes 0.5 s
+    after it is answered with the default odom_wait (1 s)."""
+    localizer, wheels, laser = corridor_localizer_with_driver(nodes, executor,
+                                                              collector_factory)
     for stamp_s, publisher, msg in ((1, wheels, odom(1.0, 0.5, 0.0)),
                                     (2, laser, scan([1.0] * 63))):
         msg.header.stamp.sec = stamp_s
@@ -158,12 +165,8 @@ def test_a_scan_waits_odom_wait_for_the_odometry_of_its_time(nodes, executor,
 def test_scans_that_wait_together_are_taken_in_order(nodes, executor, collector_factory):
     """A real log's scans come in pairs 0.05 s apart, before the odometry of their time:
     both wait, and both are taken, in order, when it comes (none superseded)."""
-    localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=8)
-    driver = collector_factory({"pose": PoseWithCovarianceStamped}, name="driver")
-    wheels = driver.node.create_publisher(Odometry, "odom", 10)
-    laser = driver.node.create_publisher(LaserScan, "scan", 10)
-    assert spin_until(executor, lambda: wheels.get_subscription_count() > 0
-                      and laser.get_subscription_count() > 0, 10.0)
+    localizer, wheels, laser = corridor_localizer_with_driver(nodes, executor,
+                                                              collector_factory)
     first = odom(1.0, 0.5, 0.0)
     first.header.stamp.sec = 1
     wheels.publish(first)
