@@ -18,11 +18,17 @@ which unblocks it.
 
 from __future__ import annotations
 
+import _thread
 import importlib
 import signal
 import sys
+import time
 from collections.abc import Callable
 from typing import Any
+
+#: Seconds before a Ctrl-C swallowed by a finalizer is given back (the hook returns in
+#: microseconds).
+REDELIVERY_DELAY_S = 0.01
 
 #: Each node's executable and the module that holds its ``main()``.
 NODE_MODULES = {
@@ -67,6 +73,7 @@ def run_main(module: str, interrupted_code: int) -> None:
     # From here on the program's own handling (KeyboardInterrupt, or a noted Ctrl-C:
     # nodes/process.py).
     signal.signal(signal.SIGINT, signal.default_int_handler)
+    sys.unraisablehook = redeliver_interrupts
     try:
         main()
     except (Exception, KeyboardInterrupt) as error:
@@ -77,6 +84,25 @@ def run_main(module: str, interrupted_code: int) -> None:
             raise
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         sys.exit(interrupted_code)
+
+
+def redeliver_interrupts(unraisable: Any) -> None:
+    """``sys.unraisablehook``: a Ctrl-C that landed in a finalizer (rclpy's
+    ``RcutilsLogger.__del__``, a weakref callback) is swallowed there by Python with an
+    "Exception ignored in" traceback; it is given back to the main thread instead, where
+    the program's own handling takes it. Anything else goes to Python's own hook."""
+    if isinstance(unraisable.exc_value, KeyboardInterrupt):
+        # Not from here: an interrupt raised inside this hook is swallowed in its turn.
+        _thread.start_new_thread(_interrupt_main_soon, ())
+        return
+    sys.__unraisablehook__(unraisable)
+
+
+def _interrupt_main_soon() -> None:
+    """The Ctrl-C given back once the hook has returned; one that lands in a finalizer
+    again comes back through the hook again."""
+    time.sleep(REDELIVERY_DELAY_S)
+    _thread.interrupt_main()     # nothing where SIGINT is ignored (the end has begun)
 
 
 def caused_by_interrupt(error: BaseException) -> bool:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import signal
 import sys
+import time
 import types
 
 import pytest
@@ -43,6 +44,7 @@ def fake_program(monkeypatch):
     """A module named ``fake_program`` whose main() raises what the test gives it."""
     module = types.ModuleType("fake_program")
     monkeypatch.setitem(sys.modules, "fake_program", module)
+    monkeypatch.setattr(sys, "unraisablehook", sys.unraisablehook)   # run_main sets it
     previous = signal.getsignal(signal.SIGINT)
     yield module
     signal.signal(signal.SIGINT, previous)
@@ -80,3 +82,28 @@ def test_the_programs_own_exit_code_is_kept_after_its_ctrl_c_handling(fake_progr
     with pytest.raises(SystemExit) as ended:
         run_main("fake_program", 130)
     assert ended.value.code == 7
+
+
+def test_a_ctrl_c_swallowed_by_a_finalizer_reaches_the_program(fake_program, capsys):
+    # Python prints an "Exception ignored in" traceback for an exception out of a __del__
+    # (rclpy's RcutilsLogger.__del__ under a demo's Ctrl-C) and goes on as if nothing
+    # happened; run_main gives the Ctrl-C back to the program instead.
+    class Finalized:
+        def __del__(self):
+            raise KeyboardInterrupt
+
+    def main():
+        try:
+            Finalized()                 # dropped at once: its __del__ is interrupted
+            deadline = time.monotonic() + 5.0
+            while time.monotonic() < deadline:     # the Ctrl-C given back arrives here
+                pass
+        except KeyboardInterrupt:
+            sys.exit(42)
+        sys.exit(0)
+
+    fake_program.main = main
+    with pytest.raises(SystemExit) as ended:
+        run_main("fake_program", 130)
+    assert ended.value.code == 42
+    assert "Exception ignored" not in capsys.readouterr().err
