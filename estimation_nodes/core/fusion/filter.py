@@ -1,0 +1,173 @@
+"""The fusion filter as robot_localization's node runs it, with no ROS in it.
+
+- The first measurement initializes: the entries it measures take its values and
+  covariance, the others keep the initial state and ``initial_estimate_covariance``.
+- Later ones predict from the last measurement's time to theirs (none when they are
+  not later), then correct; the last measurement time only moves forward.
+- ``update(now)`` is the node's periodic step: it takes the queued measurements whose
+  time has come, in time order (equal times in the order they arrived); when none was
+  queued for ``sensor_timeout`` it predicts to ``now`` so the estimate keeps moving.
+- ``differentiate(now)`` is the angular acceleration the IMU's lever arm needs, the
+  change of the rates between two periodic steps, as the peer computes it.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from estimation_nodes.core.fusion import steps
+from estimation_nodes.core.fusion.state import STATE_SIZE, TWIST, VROLL
+from estimation_nodes.core.fusion.steps import Measurement, Rejected, UnscentedWeights
+from estimation_nodes.core.validation import FloatArray
+
+
+@dataclass(frozen=True)
+class FusionSettings:
+    """What the filter needs of the configuration (robot_localization's meanings)."""
+
+    #: "ekf" or "ukf".
+    kind: str = "ekf"
+    process_noise: FloatArray = field(default_factory=lambda: np.eye(STATE_SIZE) * 0.01)
+    initial_covariance: FloatArray = field(default_factory=lambda: np.eye(STATE_SIZE) * 1e-9)
+    initial_state: FloatArray = field(default_factory=lambda: np.zeros(STATE_SIZE))
+    sensor_timeout_ns: int = 33_333_333
+    predict_to_current_time: bool = False
+    dynamic_process_noise: bool = False
+    weights: UnscentedWeights = UnscentedWeights()
+
+
+@dataclass
+class Counts:
+    """What happened to the measurements, by source (for diagnostics)."""
+
+    applied: dict[str, int] = field(default_factory=dict)
+    rejected: dict[str, int] = field(default_factory=dict)
+
+    def add(self, table: dict[str, int], source: str) -> None:
+        table[source] = table.get(source, 0) + 1
+
+
+class FusionFilter:
+    """robot_localization's filter loop over ``steps``' EKF or UKF."""
+
+    def __init__(self, settings: FusionSettings) -> None:
+        if settings.kind not in ("ekf", "ukf"):
+            raise ValueError(f"filter kind must be 'ekf' or 'ukf', got {settings.kind!r}")
+        self.settings = settings
+        self.counts = Counts()
+        self._arrivals = itertools.count()
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to the initial state, uninitialized, with nothing queued."""
+        self.x = np.array(self.settings.initial_state, dtype=float)
+        self.p = np.array(self.settings.initial_covariance, dtype=float)
+        self.initialized = False
+        self.last_time_ns = 0
+        self._queue: list[tuple[int, int, Measurement]] = []
+        # The UKF's sigma points for its next correction: the propagated ones right after
+        # a prediction, None for "draw new ones" (the peer starts with all-zero points).
+        self._points: FloatArray | None = np.zeros((2 * STATE_SIZE + 1, STATE_SIZE))
+        self._last_rates = np.zeros(3)
+        self._last_diff_ns: int | None = None
+        self.angular_acceleration = np.zeros(3)
+
+    # --- the peer's FilterBase::processMeasurement --------------------------------------
+
+    def process(self, measurement: Measurement) -> bool:
+        """Predict to the measurement's time and correct; False when it was rejected."""
+        if not self.initialized:
+            self._initialize(measurement)
+            return True
+        delta_ns = measurement.stamp_ns - self.last_time_ns
+        if delta_ns > 0:
+            self.predict(delta_ns)
+        try:
+            self._correct(measurement)
+        except Rejected:
+            self.counts.add(self.counts.rejected, measurement.source)
+            accepted = False
+        else:
+            self.counts.add(self.counts.applied, measurement.source)
+            accepted = True
+        if delta_ns >= 0:
+            self.last_time_ns = measurement.stamp_ns
+        return accepted
+
+    def _initialize(self, measurement: Measurement) -> None:
+        idx = list(measurement.indices)
+        self.x[idx] = measurement.z[idx]
+        self.p[np.ix_(idx, idx)] = measurement.covariance[np.ix_(idx, idx)]
+        self.initialized = True
+        self.last_time_ns = measurement.stamp_ns
+        self.counts.add(self.counts.applied, measurement.source)
+
+    def _process_noise(self) -> FloatArray:
+        q = self.settings.process_noise
+        if not self.settings.dynamic_process_noise:
+            return q
+        speed = float(np.linalg.norm(self.x[TWIST]))
+        dynamic = q.copy()
+        dynamic[:6, :6] = speed * speed * q[:6, :6]
+        return dynamic
+
+    def predict(self, delta_ns: int) -> None:
+        """Move the estimate ``delta_ns`` forward with the motion model."""
+        dt = delta_ns * 1e-9
+        q = self._process_noise()
+        if self.settings.kind == "ekf":
+            self.x, self.p = steps.ekf_predict(self.x, self.p, q, dt)
+        else:
+            self.x, self.p, self._points = steps.ukf_predict(
+                self.x, self.p, q, dt, self.settings.weights)
+
+    def _correct(self, measurement: Measurement) -> None:
+        if self.settings.kind == "ekf":
+            self.x, self.p = steps.ekf_correct(self.x, self.p, measurement)
+            return
+        self.x, self.p = steps.ukf_correct(
+            self.x, self.p, measurement, self.settings.weights, self._points)
+        self._points = None
+
+    # --- the peer's RosFilter::integrateMeasurements -----------------------------------
+
+    def enqueue(self, measurement: Measurement) -> None:
+        heapq.heappush(self._queue, (measurement.stamp_ns, next(self._arrivals), measurement))
+
+    @property
+    def queued(self) -> int:
+        return len(self._queue)
+
+    def update(self, now_ns: int) -> int:
+        """The periodic step at ``now_ns``: the measurements due, else a timeout prediction.
+
+        Returns how many measurements it took.
+        """
+        taken = 0
+        predict_to_now = self.settings.predict_to_current_time
+        if self._queue:
+            while self._queue and self._queue[0][0] <= now_ns:
+                _, _, measurement = heapq.heappop(self._queue)
+                self.process(measurement)
+                taken += 1
+        elif self.initialized and now_ns - self.last_time_ns >= self.settings.sensor_timeout_ns:
+            predict_to_now = True
+        if self.initialized and predict_to_now and now_ns > self.last_time_ns:
+            self.predict(now_ns - self.last_time_ns)
+            self.last_time_ns = now_ns
+        return taken
+
+    def differentiate(self, now_ns: int) -> None:
+        """The angular acceleration since the last periodic step (the peer's estimate)."""
+        if not self.initialized:
+            return
+        rates = self.x[VROLL:VROLL + 3].copy()
+        if self._last_diff_ns is not None and now_ns > self._last_diff_ns:
+            self.angular_acceleration = (rates - self._last_rates) / (
+                (now_ns - self._last_diff_ns) * 1e-9)
+        self._last_rates = rates
+        self._last_diff_ns = now_ns

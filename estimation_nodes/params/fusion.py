@@ -1,0 +1,172 @@
+"""robot_localization's parameters for ``ekf_node`` / ``ukf_node``, read from a dict.
+
+The names and meanings are the peer's, so a robot_localization YAML works unchanged;
+``FusionConfig.unsupported`` lists each parameter given that this package does not act
+on yet (the node says each in one warning line), never silently ignored.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from estimation_nodes.core.fusion.filter import FusionSettings
+from estimation_nodes.core.fusion.sensors import SensorConfig
+from estimation_nodes.core.fusion.state import STATE_SIZE
+from estimation_nodes.core.fusion.steps import UnscentedWeights
+
+#: Parameters read and acted on (beyond the per-sensor ones).
+SUPPORTED = {
+    "frequency", "sensor_timeout", "two_d_mode", "map_frame", "odom_frame",
+    "base_link_frame", "world_frame", "publish_tf", "transform_time_offset",
+    "transform_timeout", "process_noise_covariance", "initial_estimate_covariance",
+    "initial_state", "predict_to_current_time", "dynamic_process_noise_covariance",
+    "gravitational_acceleration", "alpha", "kappa", "beta", "filter_type",
+    "print_diagnostics", "use_sim_time",
+}
+#: Parameters that change nothing a run computes (logging, the peer's launch helpers).
+HARMLESS = {"clear_params", "debug", "debug_out_file"}
+SENSOR_KINDS = ("odom", "twist", "imu")
+#: Per-sensor suffixes read and acted on.
+SENSOR_SUFFIXES = {
+    "", "_config", "_queue_size", "_differential", "_relative",
+    "_remove_gravitational_acceleration", "_pose_rejection_threshold",
+    "_twist_rejection_threshold", "_linear_acceleration_rejection_threshold",
+}
+
+
+class FusionConfigError(ValueError):
+    """A parameter that cannot be used: the message names it and the expected form."""
+
+
+@dataclass(frozen=True)
+class FusionConfig:
+    settings: FusionSettings
+    sensors: dict[str, SensorConfig]
+    frequency: float = 30.0
+    world_frame: str = "odom"
+    base_link_frame: str = "base_link"
+    odom_frame: str = "odom"
+    map_frame: str = "map"
+    publish_tf: bool = True
+    gravity: float = 9.80665
+    unsupported: tuple[str, ...] = field(default_factory=tuple)
+
+
+def _matrix(params: dict[str, Any], name: str, default: np.ndarray) -> np.ndarray:
+    if name not in params:
+        return default
+    values = np.asarray(params[name], dtype=float)
+    if values.size != STATE_SIZE * STATE_SIZE or not np.all(np.isfinite(values)):
+        raise FusionConfigError(f"{name}: expected {STATE_SIZE * STATE_SIZE} finite numbers "
+                                f"(a {STATE_SIZE}x{STATE_SIZE} matrix, row-major), "
+                                f"got {values.size}")
+    return values.reshape(STATE_SIZE, STATE_SIZE)
+
+
+def _update_vector(params: dict[str, Any], name: str) -> tuple[bool, ...]:
+    values = params.get(f"{name}_config", [False] * STATE_SIZE)
+    if len(values) != STATE_SIZE:
+        raise FusionConfigError(f"{name}_config: expected {STATE_SIZE} booleans "
+                                f"(x y z roll pitch yaw vx vy vz vroll vpitch vyaw ax ay az), "
+                                f"got {len(values)}")
+    return tuple(bool(v) for v in values)
+
+
+def _threshold(params: dict[str, Any], name: str) -> float:
+    value = float(params.get(name, math.inf))
+    if not value > 0:
+        raise FusionConfigError(f"{name}: expected a positive number of standard deviations")
+    return value
+
+
+def _sensors(params: dict[str, Any]) -> tuple[dict[str, SensorConfig], list[str]]:
+    sensors: dict[str, SensorConfig] = {}
+    unsupported: list[str] = []
+    for kind in SENSOR_KINDS:
+        index = 0
+        while f"{kind}{index}" in params:
+            name = f"{kind}{index}"
+            update = _update_vector(params, name)
+            if kind == "odom" and any(update[:6]):
+                unsupported.append(f"{name}_config (pose entries: only the twist is fused)")
+            if params.get(f"{name}_differential", False):
+                unsupported.append(f"{name}_differential")
+            sensors[name] = SensorConfig(
+                name=name, kind=kind, topic=str(params[name]),
+                update=update if kind != "odom" else tuple(
+                    flag and i >= 6 for i, flag in enumerate(update)),
+                pose_threshold=_threshold(params, f"{name}_pose_rejection_threshold"),
+                twist_threshold=_threshold(params, f"{name}_twist_rejection_threshold"),
+                acceleration_threshold=_threshold(
+                    params, f"{name}_linear_acceleration_rejection_threshold"),
+                remove_gravity=bool(params.get(f"{name}_remove_gravitational_acceleration",
+                                               False)),
+                relative=bool(params.get(f"{name}_relative", False)),
+                queue_size=int(params.get(f"{name}_queue_size", 10)))
+            index += 1
+    return sensors, unsupported
+
+
+def _is_sensor_parameter(name: str, sensors: dict[str, SensorConfig]) -> bool:
+    return any(name == sensor + suffix for sensor in sensors for suffix in SENSOR_SUFFIXES)
+
+
+def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConfig:
+    """The configuration of a robot_localization parameter dict (``ros__parameters``)."""
+    kind = kind or str(params.get("filter_type", "ekf"))
+    frequency = float(params.get("frequency", 30.0))
+    if not frequency > 0:
+        raise FusionConfigError("frequency: expected a positive rate in Hz")
+    timeout = float(params.get("sensor_timeout", 1.0 / frequency))
+    sensors, unsupported = _sensors(params)
+    if params.get("two_d_mode", False):
+        unsupported.append("two_d_mode")
+    unsupported += sorted(name for name in params
+                          if name not in SUPPORTED | HARMLESS
+                          and not _is_sensor_parameter(name, sensors))
+    initial_state = np.asarray(params.get("initial_state", [0.0] * STATE_SIZE), dtype=float)
+    if initial_state.size != STATE_SIZE:
+        raise FusionConfigError(f"initial_state: expected {STATE_SIZE} numbers")
+    settings = FusionSettings(
+        kind=kind,
+        process_noise=_matrix(params, "process_noise_covariance",
+                              np.diag([0.05, 0.05, 0.06, 0.03, 0.03, 0.06, 0.025, 0.025,
+                                       0.04, 0.01, 0.01, 0.02, 0.01, 0.01, 0.015])),
+        initial_covariance=_matrix(params, "initial_estimate_covariance",
+                                   np.eye(STATE_SIZE) * 1e-9),
+        initial_state=initial_state,
+        sensor_timeout_ns=round(timeout * 1e9),
+        predict_to_current_time=bool(params.get("predict_to_current_time", False)),
+        dynamic_process_noise=bool(params.get("dynamic_process_noise_covariance", False)),
+        weights=UnscentedWeights(float(params.get("alpha", 0.001)),
+                                 float(params.get("kappa", 0.0)),
+                                 float(params.get("beta", 2.0))))
+    return FusionConfig(
+        settings=settings, sensors=sensors, frequency=frequency,
+        world_frame=str(params.get("world_frame", params.get("odom_frame", "odom"))),
+        base_link_frame=str(params.get("base_link_frame", "base_link")),
+        odom_frame=str(params.get("odom_frame", "odom")),
+        map_frame=str(params.get("map_frame", "map")),
+        publish_tf=bool(params.get("publish_tf", True)),
+        gravity=float(params.get("gravitational_acceleration", 9.80665)),
+        unsupported=tuple(unsupported))
+
+
+def parameters_of_file(path: str, node_name: str | None = None) -> dict[str, Any]:
+    """The ``ros__parameters`` of one node in a ROS parameter file (the first with a
+    ``filter_type`` or ``frequency`` when no name is given)."""
+    import yaml
+
+    with open(path, encoding="utf-8") as stream:
+        document = yaml.safe_load(stream) or {}
+    for name, section in document.items():
+        params = (section or {}).get("ros__parameters", {})
+        if (node_name is None and ("frequency" in params or "filter_type" in params)) \
+                or name.lstrip("/") == node_name:
+            return dict(params)
+    raise FusionConfigError(f"{path}: no node {node_name or 'with filter parameters'} "
+                            f"under ros__parameters")

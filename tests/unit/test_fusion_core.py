@@ -1,0 +1,126 @@
+"""The 15-state fusion core: its motion model, steps and inputs against direct computations."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from estimation_nodes.core.fusion import inputs, motion, state, steps
+from estimation_nodes.core.fusion.filter import FusionFilter, FusionSettings
+from estimation_nodes.core.fusion.steps import Measurement
+from estimation_nodes.params.fusion import FusionConfigError, fusion_config
+
+RNG = np.random.default_rng(7)
+
+
+def random_state() -> np.ndarray:
+    x = RNG.normal(size=15)
+    x[state.PITCH] = RNG.uniform(-1.0, 1.0)
+    return x
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_jacobian_is_the_derivative_of_the_motion(seed):
+    x, dt, eps = random_state(), 0.05, 1e-6
+
+    def move(v):
+        return motion.transfer(v, dt) @ v
+
+    numeric = np.column_stack([(move(x + eps * e) - move(x - eps * e)) / (2 * eps)
+                               for e in np.eye(15)])
+    np.testing.assert_allclose(motion.jacobian(x, dt), numeric, atol=1e-7)
+
+
+def test_the_motion_moves_the_pose_by_the_rotated_twist():
+    x = np.zeros(15)
+    x[state.YAW] = math.pi / 2
+    x[state.VX] = 2.0
+    x[state.AX] = 1.0
+    moved = motion.transfer(x, 0.5) @ x
+    # Facing +y: 2 m/s for 0.5 s plus 1/2 * 1 * 0.25 along y, and vx grows by a dt.
+    np.testing.assert_allclose(moved[[state.X, state.Y, state.VX]], [0.0, 1.125, 2.5],
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("rpy", [(0.1, -0.4, 2.5), (-3.0, 1.2, -0.3), (0.0, 0.0, 0.0)])
+def test_rpy_round_trips_through_the_rotation_and_the_quaternion(rpy):
+    rotation = state.rotation_from_rpy(*rpy)
+    np.testing.assert_allclose(state.rpy_from_rotation(rotation), rpy, atol=1e-12)
+    q = state.quaternion_from_rpy(*rpy)
+    np.testing.assert_allclose(state.rotation_from_quaternion(*q), rotation, atol=1e-12)
+
+
+def test_ekf_correct_is_the_joseph_form_of_the_direct_computation():
+    x = random_state()
+    a = RNG.normal(size=(15, 15))
+    p = a @ a.T + np.eye(15)
+    z = np.zeros(15)
+    z[[6, 11]] = [1.5, -0.2]
+    r = np.diag(np.full(15, 0.04))
+    measurement = Measurement(0, z, r, (6, 11))
+    x_new, p_new = steps.ekf_correct(x, p, measurement)
+    h = np.eye(15)[[6, 11]]
+    k = p @ h.T @ np.linalg.inv(h @ p @ h.T + r[np.ix_([6, 11], [6, 11])])
+    np.testing.assert_allclose(x_new, state.wrap_state_angles(x + k @ (z[[6, 11]] - h @ x)),
+                               atol=1e-10)
+    np.testing.assert_allclose(p_new, (np.eye(15) - k @ h) @ p, atol=1e-9)
+
+
+def test_a_measurement_beyond_its_threshold_is_rejected_and_changes_nothing():
+    fusion = FusionFilter(FusionSettings())
+    z = np.zeros(15)
+    fusion.process(Measurement(0, z, np.eye(15) * 0.01, (6,), source="odom0_twist"))
+    far = z.copy()
+    far[6] = 100.0
+    x_before = fusion.x.copy()
+    assert not fusion.process(Measurement(0, far, np.eye(15) * 0.01, (6,), 3.0, "odom0_twist"))
+    np.testing.assert_array_equal(fusion.x, x_before)
+    assert fusion.counts.rejected == {"odom0_twist": 1}
+
+
+@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+def test_both_filters_follow_a_constant_velocity(kind):
+    fusion = FusionFilter(FusionSettings(kind=kind))
+    for k in range(200):
+        z = np.zeros(15)
+        z[state.VX] = 1.0
+        fusion.enqueue(Measurement(k * 20_000_000, z, np.eye(15) * 1e-4, (6, 7, 8, 9, 10, 11)))
+        fusion.update(k * 20_000_000)
+    # 199 steps of 20 ms at 1 m/s along x. The UKF's first correction after each
+    # prediction uses the propagated sigma points (the peer's order), which lag it by
+    # 2.5% here; the EKF is exact.
+    assert fusion.x[state.X] == pytest.approx(3.98, rel=0.03)
+    assert np.all(np.isfinite(fusion.p))
+
+
+def test_an_imu_at_rest_measures_no_acceleration_once_gravity_is_removed():
+    level = np.eye(3)
+    measured = inputs.acceleration(
+        0, np.array([0.0, 0.0, inputs.GRAVITY]), np.eye(3) * 0.01, (False,) * 12 + (True,) * 3,
+        np.zeros(3), np.zeros(3), level, remove_gravity=True)
+    np.testing.assert_allclose(measured.z[12:15], 0.0, atol=1e-12)
+
+
+def test_a_mount_turns_the_twist_and_its_mask():
+    # A sensor turned 90 degrees about z: its x is the robot's y.
+    mount = inputs.Mount.from_rpy((0.0, 0.0, 0.0), (0.0, 0.0, math.pi / 2))
+    update = tuple(i == state.VX for i in range(15))
+    measured = inputs.twist(0, np.array([1.0, 0.0, 0.0]), np.zeros(3), np.eye(6) * 0.1,
+                            update, np.zeros(3), mount)
+    assert measured.indices == (state.VY,)
+    assert measured.z[state.VY] == pytest.approx(1.0)
+
+
+def test_the_config_reads_the_peers_names_and_says_what_it_does_not_support():
+    config = fusion_config({"frequency": 50.0, "odom0": "/odom",
+                            "odom0_config": [False] * 6 + [True] * 3 + [False] * 6,
+                            "use_control": True, "imu0": "/imu", "imu0_config": [False] * 15})
+    assert config.frequency == 50.0
+    assert config.sensors["odom0"].update[6:9] == (True, True, True)
+    assert "use_control" in config.unsupported
+    with pytest.raises(FusionConfigError, match="process_noise_covariance: expected 225"):
+        fusion_config({"process_noise_covariance": [1.0, 2.0]})
+    with pytest.raises(FusionConfigError, match="frequency"):
+        fusion_config({"frequency": 0})
