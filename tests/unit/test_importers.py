@@ -72,16 +72,35 @@ def test_the_raw_odometry_is_rebuilt_from_a_corrected_log(tmp_path):
     assert log.left_out == {}
 
 
-def test_malformed_lines_are_counted_and_a_time_running_back_is_raised(tmp_path):
+def test_malformed_lines_are_counted_and_a_time_running_back_is_sorted_in(tmp_path):
     text = corrected_log().replace("NEFF 12.5\n", "NEFF 12.5\nFLASER 3 1 2\nODOM 1 x 2\n", 1)
-    text += "ODOM 0 0 0 0 0 0 2.5 h 2.5\nRLASER 1 1\n"
+    text += "ODOM 2.8 1.3 0.85 0.2 0 0 2.5 h 2.5\nRLASER 1 1\n"
     path = tmp_path / "run.log.gz"
     path.write_bytes(gzip.compress(text.encode()))
     log = carmen.read_log(path)
     assert log.left_out == {"malformed FLASER lines": 1, "malformed ODOM lines": 1,
                             "RLASER lines (not used)": 1}
-    assert log.times_raised == 1 and log.odometry[-1].t == pytest.approx(3.02)
-    assert [o.t for o in log.odometry] == sorted(o.t for o in log.odometry)
+    # every line kept: the late one at its own time, between 2.01 and 3.01
+    assert log.odometry_reordered == 1
+    assert [o.t for o in log.odometry] == [0.01, 1.01, 1.02, 2.01, 2.5, 3.01, 3.02]
+    late = log.odometry[4]
+    assert late.tv == 0.2
+    # rebuilt, as the lines before it, from the last scan's restart
+    expected = carmen.compose(RAW[3], carmen.relative(CORRECTED[3.0], (2.8, 1.3, 0.85)))
+    np.testing.assert_allclose(late.pose, expected, atol=1e-12)
+
+
+def test_a_restart_line_with_a_leftover_time_still_takes_its_scans_time(tmp_path):
+    # Some corrected logs write 1e-42 or 1.13 rather than 0 on the restart line.
+    text = corrected_log().replace(" 0 h 0\n", " 1.08499e-42 h 0\n", 1)
+    text = text.replace(" 0 h 0\n", " 1.13 h 0\n", 1)
+    assert text.count("1.08499e-42") == text.count(" 1.13 h") == 1
+    path = tmp_path / "run.log"
+    path.write_text(text)
+    log = carmen.read_log(path)
+    assert log.odometry_reordered == 0
+    restarts = [o for o in log.odometry if o.t in (1.02, 3.02)]
+    np.testing.assert_allclose([o.pose for o in restarts], [RAW[1], RAW[3]], atol=1e-12)
 
 
 def test_a_carmen_log_becomes_a_recording_of_scans_odometry_and_truth(tmp_path, capsys):
@@ -125,7 +144,11 @@ def test_a_log_that_cannot_be_read_is_one_line_and_exit_2(tmp_path, capsys, cont
 def test_the_intel_log_keeps_its_real_drift():
     log = carmen.read_log(SHARED / "carmen" / "intel-corrected.log.gz")
     assert len(log.scans) == 910 and log.left_out == {}
+    # every ODOM line kept, in time order; the restart lines with a leftover time (1e-42,
+    # 1.13) stay at their scans rather than going to the log's start
+    assert len(log.odometry) == 14541 and log.odometry_reordered == 840
     times = np.array([o.t for o in log.odometry])
+    assert np.all(np.diff(times) >= 0) and times[0] == pytest.approx(0.000246)
 
     def raw_at(t):
         return log.odometry[np.searchsorted(times, t, "right") - 1].pose

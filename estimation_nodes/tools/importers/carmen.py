@@ -7,12 +7,19 @@ against). ``ODOM x y theta tv rv accel t host t_logger``: odometry. In a correct
 the odometry restarts at each scan's corrected pose (a line with t = 0 right after
 the FLASER), so the raw wheel odometry, with its real drift, is rebuilt here by
 chaining each scan-to-scan step: (pose[k-1])^-1 (+) (the last ODOM before scan k).
+
+The restart line is the first ODOM after a scan with that scan's pose and a time that is
+0 or earlier than the scan's (some logs leave a leftover value there, such as 1e-42 or
+1.13, rather than 0): it takes its scan's time. The odometry is rebuilt in the log's
+order and then sorted by time, stably, so that no line is lost when the log's time runs
+back; ``odometry_reordered`` counts the lines that sort moved.
 """
 
 from __future__ import annotations
 
 import gzip
 import math
+from bisect import bisect_right
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -51,8 +58,10 @@ class CarmenLog:
     odometry: list[OdometrySample]
     #: Lines left out by kind ("malformed FLASER", ...), and other notes with counts.
     left_out: Counter[str] = field(default_factory=Counter)
-    #: Odometry times raised to the previous one, so that time never runs back.
-    times_raised: int = 0
+    #: Odometry lines out of time order in the log, put in their place by the sort: the
+    #: fewest lines that, moved, leave the others in order (all lines minus the longest
+    #: subsequence in time order).
+    odometry_reordered: int = 0
 
     @property
     def max_reading(self) -> float:
@@ -98,13 +107,13 @@ def _odom(tokens: list[str]) -> tuple[Pose, float, float, float] | None:
 
 
 def read_log(path: Path) -> CarmenLog:
-    """A CARMEN log's scans and its raw odometry; malformed lines are counted in
-    ``left_out``, never silently dropped."""
+    """A CARMEN log's scans and its raw odometry, sorted by time (stably); malformed lines
+    are counted in ``left_out``, never silently dropped."""
     log = CarmenLog([], [])
     raw_at_scan: Pose | None = None      # the raw odometry at the last scan
     restart: Pose | None = None          # the pose the log's odometry restarted at
     last_raw: Pose = (0.0, 0.0, 0.0)
-    last_t = -math.inf
+    after_scan = False                   # no ODOM line yet since the last scan
     for line in _lines(Path(path)):
         tokens = line.split()
         if not tokens or tokens[0].startswith("#") or tokens[0] in ("PARAM", "NEFF", "SYNC"):
@@ -115,25 +124,42 @@ def read_log(path: Path) -> CarmenLog:
                 log.left_out["malformed FLASER lines"] += 1
                 continue
             log.scans.append(scan)
-            raw_at_scan, restart = last_raw, scan.pose
+            after_scan = True
         elif tokens[0] == "ODOM":
             parsed = _odom(tokens)
             if parsed is None:
                 log.left_out["malformed ODOM lines"] += 1
                 continue
             pose, tv, rv, t = parsed
+            if after_scan and _restarts(log.scans[-1], pose, t):
+                # A corrected log's odometry from here on is since this scan, from its pose.
+                raw_at_scan, restart, t = last_raw, log.scans[-1].pose, log.scans[-1].t
+            after_scan = False
             if restart is not None and raw_at_scan is not None:
-                # A corrected log's odometry since the last scan, from that scan's pose.
                 pose = compose(raw_at_scan, relative(restart, pose))
-            if t == 0 and log.scans:
-                t = log.scans[-1].t          # the restart line belongs to its scan
-            if t < last_t:
-                t = last_t
-                log.times_raised += 1
-            last_t, last_raw = t, pose
+            last_raw = pose
             log.odometry.append(OdometrySample(t, pose, tv, rv))
         else:
             log.left_out[f"{tokens[0]} lines (not used)"] += 1
     if not log.scans:
         raise LogError(f"{path}: no FLASER line: not a CARMEN laser log")
+    log.odometry_reordered = _out_of_order(log.odometry)
+    log.odometry.sort(key=lambda sample: sample.t)
     return log
+
+
+def _restarts(scan: Scan, pose: Pose, t: float) -> bool:
+    """Whether the first ODOM line after ``scan`` is a corrected log's restart at it."""
+    return pose == scan.pose and (t <= 0 or t < scan.t)
+
+
+def _out_of_order(odometry: list[OdometrySample]) -> int:
+    """The lines a stable sort by time moves: all minus the longest subsequence in order."""
+    ends: list[float] = []               # the least end of an ordered subsequence, by length
+    for sample in odometry:
+        index = bisect_right(ends, sample.t)
+        if index == len(ends):
+            ends.append(sample.t)
+        else:
+            ends[index] = sample.t
+    return len(odometry) - len(ends)

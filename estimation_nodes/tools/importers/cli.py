@@ -100,9 +100,9 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None) -> list[st
     writer.close()
     origin = "given" if range_max is not None else "the log's largest reading"
     notes = [f"range_max {limit:g} m ({origin})"]
-    if log.times_raised:
-        notes.append(f"{log.times_raised} odometry times raised to the one before "
-                     f"(the log's time ran back)")
+    if log.odometry_reordered:
+        notes.append(f"{log.odometry_reordered} odometry lines reordered by time (the "
+                     f"log's time ran back; every line kept, sorted stably by time)")
     return _report(writer.counts, log.left_out, notes)
 
 
