@@ -13,6 +13,8 @@ import pytest
 from estimation_nodes.tools.importers import carmen, cli, utias
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "data"
+needs_shared = pytest.mark.skipif(not (SHARED / "carmen").is_dir(),
+                                  reason=f"no CARMEN logs at {SHARED}")
 
 
 def decoded(path: Path) -> dict[str, list]:
@@ -140,7 +142,7 @@ def test_a_log_that_cannot_be_read_is_one_line_and_exit_2(tmp_path, capsys, cont
     assert err.startswith("estimation_import: ") and err.count("\n") == 1
 
 
-@pytest.mark.skipif(not (SHARED / "carmen").is_dir(), reason=f"no CARMEN logs at {SHARED}")
+@needs_shared
 def test_the_intel_log_keeps_its_real_drift():
     log = carmen.read_log(SHARED / "carmen" / "intel-corrected.log.gz")
     assert len(log.scans) == 910 and log.left_out == {}
@@ -158,6 +160,120 @@ def test_the_intel_log_keeps_its_real_drift():
                                                                raw_at(last.t)))
     drift = math.hypot(dead_reckoned[0] - last.pose[0], dead_reckoned[1] - last.pose[1])
     assert 50 < drift < 75      # the data's README: 62 m of drift by the end
+
+
+def stalled_log(times: list[str]) -> str:
+    """Scans at ``times`` (as printed), an odometry line before, between and after them."""
+    lines = ["ODOM 0 0 0 0 0 0 T h T"]
+    for k, t in enumerate(times):
+        lines.append(f"FLASER 2 1.0 2.0 {k} 0 0 {k} 0 0 {t} h {t}")
+        lines += [f"ODOM {k + 0.5} 0 0 0 0 0 {t} h {t}"] * (k % 2 + 1)
+    return "\n".join(lines).replace("T", times[0]) + "\n"
+
+
+def test_a_log_whose_times_do_not_advance_is_refused_naming_scan_rate(tmp_path, capsys):
+    path = tmp_path / "run.log"
+    path.write_text(stalled_log(["1.13486e+09"] * 4 + ["1.13487e+09"]))
+    with pytest.raises(SystemExit) as ended:
+        cli.main(["carmen", str(path), "-o", str(tmp_path / "run.mcap")])
+    assert ended.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "do not advance: 5 scans at 2 distinct times" in err
+    assert "--scan-rate HZ" in err
+    # half the scans at distinct times is not refused (two lasers, a repeated stamp)
+    path.write_text(stalled_log(["1.5", "1.5", "1.6", "1.7"]))
+    assert len(carmen.read_log(path).scans) == 4
+
+
+def test_scan_rate_places_scans_in_log_order_and_odometry_between(tmp_path):
+    path = tmp_path / "run.log"
+    path.write_text(stalled_log(["1.13486e+09"] * 3))
+    log = carmen.read_log(path, scan_rate=10.0)
+    t0 = 1.13486e9
+    assert log.scan_rate == 10.0
+    np.testing.assert_allclose([s.t - t0 for s in log.scans], [0.0, 0.1, 0.2], atol=1e-6)
+    assert [s.pose[0] for s in log.scans] == [0.0, 1.0, 2.0]     # the log's order
+    # one line before the first scan (in the period before it), one after scan 0, two
+    # after scan 1 (thirds of the period), one after the last (in the period after it)
+    np.testing.assert_allclose([o.t - t0 for o in log.odometry],
+                               [-0.05, 0.05, 0.1 + 0.1 / 3, 0.1 + 0.2 / 3, 0.25],
+                               atol=1e-6)
+    assert [o.pose[0] for o in log.odometry] == [0.0, 0.5, 1.5, 1.5, 2.5]
+    assert log.odometry_reordered == 0
+
+
+def test_scan_rate_is_a_finite_positive_rate(tmp_path, capsys):
+    with pytest.raises(SystemExit) as ended:
+        cli.main(["carmen", "run.log", "--scan-rate", "0", "-o", str(tmp_path / "r.mcap")])
+    assert ended.value.code == 2 and "--scan-rate must be" in capsys.readouterr().err
+
+
+def intel_lines() -> list[str]:
+    with gzip.open(SHARED / "carmen" / "intel-corrected.log.gz", "rt") as stream:
+        return stream.read().splitlines()
+
+
+def intel_with(tmp_path: Path, rewrite) -> Path:
+    """The Intel log with each line (its tokens, and whether it is the first ODOM after a
+    FLASER: a restart) rewritten by ``rewrite`` (None: dropped)."""
+    out, after_scan = [], False
+    for line in intel_lines():
+        tokens = line.split()
+        restart = after_scan and tokens[0] == "ODOM"
+        after_scan = tokens[0] == "FLASER" or (after_scan and tokens[0] != "ODOM")
+        new = rewrite(tokens, restart)
+        if new is not None:
+            out.append(" ".join(new))
+    path = tmp_path / "intel.log"
+    path.write_text("\n".join(out) + "\n")
+    return path
+
+
+def printed_g(base: float):
+    """Times as a log printed with %g would have them: six significant digits."""
+    def rewrite(tokens: list[str], restart: bool) -> list[str]:
+        if tokens[0] == "FLASER":
+            at = 2 + int(tokens[1]) + 6
+        elif tokens[0] == "ODOM" and not restart:
+            at = 7
+        else:
+            return tokens
+        stamp = f"{base + float(tokens[at]):g}"
+        return tokens[:at] + [stamp, tokens[at + 1], stamp]
+    return rewrite
+
+
+@needs_shared
+def test_the_intel_log_printed_with_g_is_refused_then_read_at_a_scan_rate(tmp_path, capsys):
+    path = intel_with(tmp_path, printed_g(1134863500.0))
+    with pytest.raises(carmen.LogError, match="910 scans at 2 distinct times"):
+        carmen.read_log(path)
+    out = tmp_path / "intel.mcap"
+    cli.main(["carmen", str(path), "--scan-rate", "10", "-o", str(out)])
+    assert "times placed at 10 Hz from 1134860000.000 s" in capsys.readouterr().out
+    original = carmen.read_log(SHARED / "carmen" / "intel-corrected.log.gz")
+    log = carmen.read_log(path, scan_rate=10.0)
+    times = np.array([s.t for s in log.scans])
+    np.testing.assert_allclose(np.diff(times), 0.1, atol=1e-6)
+    assert len(log.odometry) == 14541 and log.odometry_reordered == 0
+    assert [s.pose for s in log.scans] == [s.pose for s in original.scans]
+    # the raw odometry is rebuilt in the log's order whatever its times: the same poses
+    for axis in range(3):
+        np.testing.assert_allclose(np.sort([o.pose[axis] for o in log.odometry]),
+                                   np.sort([o.pose[axis] for o in original.odometry]),
+                                   atol=1e-9)
+    # and at each scan (the restart line, at the scan's time) the raw odometry there
+    odom_times = np.array([o.t for o in log.odometry])
+    first, last = (log.odometry[np.searchsorted(odom_times, t, "right") - 1].pose
+                   for t in (times[0], times[-1]))
+    dead_reckoned = carmen.compose(log.scans[0].pose, carmen.relative(first, last))
+    drift = math.hypot(dead_reckoned[0] - log.scans[-1].pose[0],
+                       dead_reckoned[1] - log.scans[-1].pose[1])
+    assert 50 < drift < 75
+    topics = decoded(out)
+    assert len(topics["/scan"]) == 910 and len(topics["/odom"]) == 14541
+    assert stamp(topics["/scan"][1][1]) - stamp(topics["/scan"][0][1]) \
+        == pytest.approx(0.1, abs=1e-6)
 
 
 # --- UTIAS -------------------------------------------------------------------------------

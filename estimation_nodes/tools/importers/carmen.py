@@ -13,6 +13,14 @@ The restart line is the first ODOM after a scan with that scan's pose and a time
 1.13, rather than 0): it takes its scan's time. The odometry is rebuilt in the log's
 order and then sorted by time, stably, so that no line is lost when the log's time runs
 back; ``odometry_reordered`` counts the lines that sort moved.
+
+Times that do not advance: some corrected logs print every time with six significant
+digits (``1.13486e+09``), so that a whole log has one stamp or a few. A log with fewer
+distinct scan times than half its scans (``STALLED_FRACTION``) is refused, naming
+``--scan-rate``; given a rate, ``read_log`` places the scans at it in the log's order from
+the first scan's time, and the odometry lines between two scans evenly between them
+(those before the first scan in the period before it, those after the last in the period
+after it).
 """
 
 from __future__ import annotations
@@ -21,7 +29,7 @@ import gzip
 import math
 from bisect import bisect_right
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +37,10 @@ import numpy as np
 from estimation_nodes.core.geometry import compose, relative
 
 Pose = tuple[float, float, float]
+
+#: A log whose distinct scan times are fewer than this share of its scans has times that
+#: do not advance (printed with too few digits): refused unless a scan rate is given.
+STALLED_FRACTION = 0.5
 
 
 class LogError(Exception):
@@ -62,6 +74,8 @@ class CarmenLog:
     #: fewest lines that, moved, leave the others in order (all lines minus the longest
     #: subsequence in time order).
     odometry_reordered: int = 0
+    #: The rate the scans were placed at (``read_log``'s ``scan_rate``), if one was given.
+    scan_rate: float | None = None
 
     @property
     def max_reading(self) -> float:
@@ -106,46 +120,109 @@ def _odom(tokens: list[str]) -> tuple[Pose, float, float, float] | None:
     return (x, y, theta), tv, rv, t
 
 
-def read_log(path: Path) -> CarmenLog:
+@dataclass(frozen=True)
+class _OdomLine:
+    t: float
+    pose: Pose
+    tv: float
+    rv: float
+    #: The corrected log's restart at the scan before it (see the module's docstring).
+    restart: bool
+
+
+def read_log(path: Path, scan_rate: float | None = None) -> CarmenLog:
     """A CARMEN log's scans and its raw odometry, sorted by time (stably); malformed lines
-    are counted in ``left_out``, never silently dropped."""
-    log = CarmenLog([], [])
+    are counted in ``left_out``, never silently dropped. ``scan_rate`` (Hz): the scans and
+    odometry placed at that rate in the log's order, whatever times the log gives."""
+    records, left_out = _records(Path(path))
+    scans = [r for r in records if isinstance(r, Scan)]
+    if not scans:
+        raise LogError(f"{path}: no FLASER line: not a CARMEN laser log")
+    if scan_rate is not None:
+        records = _placed_at(records, scan_rate)
+    else:
+        distinct = len({scan.t for scan in scans})
+        if distinct < STALLED_FRACTION * len(scans):
+            raise LogError(f"{path}: the times do not advance: {len(scans)} scans at "
+                           f"{distinct} distinct times (printed with too few digits?); "
+                           f"give the laser's rate with --scan-rate HZ")
+    log = CarmenLog([], [], left_out, scan_rate=scan_rate)
     raw_at_scan: Pose | None = None      # the raw odometry at the last scan
     restart: Pose | None = None          # the pose the log's odometry restarted at
     last_raw: Pose = (0.0, 0.0, 0.0)
-    after_scan = False                   # no ODOM line yet since the last scan
-    for line in _lines(Path(path)):
+    for record in records:
+        if isinstance(record, Scan):
+            log.scans.append(record)
+            continue
+        pose, t = record.pose, record.t
+        if record.restart:
+            # A corrected log's odometry from here on is since this scan, from its pose.
+            raw_at_scan, restart, t = last_raw, log.scans[-1].pose, log.scans[-1].t
+        if restart is not None and raw_at_scan is not None:
+            pose = compose(raw_at_scan, relative(restart, pose))
+        last_raw = pose
+        log.odometry.append(OdometrySample(t, pose, record.tv, record.rv))
+    log.odometry_reordered = _out_of_order(log.odometry)
+    log.odometry.sort(key=lambda sample: sample.t)
+    return log
+
+
+def _records(path: Path) -> tuple[list[Scan | _OdomLine], Counter[str]]:
+    """The log's scans and odometry lines in the log's order, and what was left out."""
+    records: list[Scan | _OdomLine] = []
+    left_out: Counter[str] = Counter()
+    last_scan: Scan | None = None        # the last scan, until an ODOM line follows it
+    for line in _lines(path):
         tokens = line.split()
         if not tokens or tokens[0].startswith("#") or tokens[0] in ("PARAM", "NEFF", "SYNC"):
             continue
         if tokens[0] == "FLASER":
             scan = _flaser(tokens)
             if scan is None:
-                log.left_out["malformed FLASER lines"] += 1
+                left_out["malformed FLASER lines"] += 1
                 continue
-            log.scans.append(scan)
-            after_scan = True
+            records.append(scan)
+            last_scan = scan
         elif tokens[0] == "ODOM":
             parsed = _odom(tokens)
             if parsed is None:
-                log.left_out["malformed ODOM lines"] += 1
+                left_out["malformed ODOM lines"] += 1
                 continue
             pose, tv, rv, t = parsed
-            if after_scan and _restarts(log.scans[-1], pose, t):
-                # A corrected log's odometry from here on is since this scan, from its pose.
-                raw_at_scan, restart, t = last_raw, log.scans[-1].pose, log.scans[-1].t
-            after_scan = False
-            if restart is not None and raw_at_scan is not None:
-                pose = compose(raw_at_scan, relative(restart, pose))
-            last_raw = pose
-            log.odometry.append(OdometrySample(t, pose, tv, rv))
+            restart = last_scan is not None and _restarts(last_scan, pose, t)
+            records.append(_OdomLine(t, pose, tv, rv, restart))
+            last_scan = None
         else:
-            log.left_out[f"{tokens[0]} lines (not used)"] += 1
-    if not log.scans:
-        raise LogError(f"{path}: no FLASER line: not a CARMEN laser log")
-    log.odometry_reordered = _out_of_order(log.odometry)
-    log.odometry.sort(key=lambda sample: sample.t)
-    return log
+            left_out[f"{tokens[0]} lines (not used)"] += 1
+    return records, left_out
+
+
+def _placed_at(records: list[Scan | _OdomLine], rate: float) -> list[Scan | _OdomLine]:
+    """The records with the scans ``1 / rate`` apart in the log's order from the first
+    scan's time, and the odometry lines between two scans evenly between them."""
+    period = 1.0 / rate
+    start = next(r.t for r in records if isinstance(r, Scan))
+    placed: list[Scan | _OdomLine] = []
+    between: list[_OdomLine] = []        # the odometry lines since the last scan
+    scan_t = start - period              # the first scan's predecessor, were there one
+
+    def spread(until: float) -> None:
+        step = (until - scan_t) / (len(between) + 1)
+        placed.extend(replace(line, t=scan_t + (i + 1) * step)
+                      for i, line in enumerate(between))
+        between.clear()
+
+    for record in records:
+        if isinstance(record, Scan):
+            spread(scan_t + period)
+            scan_t += period
+            placed.append(replace(record, t=scan_t))
+        elif record.restart:
+            placed.append(record)            # takes its scan's time when rebuilt
+        else:
+            between.append(record)
+    spread(scan_t + period)
+    return placed
 
 
 def _restarts(scan: Scan, pose: Pose, t: float) -> bool:

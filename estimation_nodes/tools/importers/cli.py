@@ -1,7 +1,7 @@
 """estimation_import: a real robot's log as a ROS 2 recording (MCAP), in the layout --record
 writes, so that estimation_play, estimation_replay, ros2 bag and Foxglove read it.
 
-    estimation_import carmen LOG -o run.mcap [--range-max M]
+    estimation_import carmen LOG -o run.mcap [--range-max M] [--scan-rate HZ]
     estimation_import utias DATASET_DIR --robot N -o run.mcap [--landmarks-file FILE]
 
 CARMEN: /scan (sensor_msgs/LaserScan with the log's angles and range_max, frame
@@ -11,8 +11,10 @@ and twist, ``odom`` -> ``base_link``), /ground_truth (geometry_msgs/PoseStamped 
 pose it dead-reckons), /landmark_observations (sensor_msgs/PointCloud2, one per
 camera frame: x = range cos(bearing), y = range sin(bearing), z = 0, id = the
 landmark's subject number), /ground_truth (Vicon), and a landmarks file (YAML).
-Every message is stamped with the log's time. What was left out is counted and
-reported; a log that cannot be read is one line and exit code 2.
+Every message is stamped with the log's time (CARMEN: with ``--scan-rate``, the scans at
+that rate in the log's order and the odometry evenly between them, for a log whose times
+do not advance). What was left out is counted and reported; a log that cannot be read is
+one line and exit code 2.
 """
 
 from __future__ import annotations
@@ -68,12 +70,13 @@ class _Writer:
         self._file.close()
 
 
-def import_carmen(log_path: Path, out: Path, range_max: float | None) -> list[str]:
+def import_carmen(log_path: Path, out: Path, range_max: float | None,
+                  scan_rate: float | None = None) -> list[str]:
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import LaserScan
 
-    log = carmen.read_log(log_path)
+    log = carmen.read_log(log_path, scan_rate)
     limit = log.max_reading if range_max is None else range_max
     writer = _Writer(out, {"/scan": LASER_SCAN, "/odom": ODOMETRY,
                            "/ground_truth": POSE_STAMPED}, str(log_path))
@@ -100,6 +103,10 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None) -> list[st
     writer.close()
     origin = "given" if range_max is not None else "the log's largest reading"
     notes = [f"range_max {limit:g} m ({origin})"]
+    if scan_rate is not None:
+        notes.append(f"times placed at {scan_rate:g} Hz from {log.scans[0].t:.3f} s "
+                     f"(--scan-rate): the scans in the log's order, the odometry evenly "
+                     f"between them")
     if log.odometry_reordered:
         notes.append(f"{log.odometry_reordered} odometry lines reordered by time (the "
                      f"log's time ran back; every line kept, sorted stably by time)")
@@ -170,6 +177,10 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     c.add_argument("--range-max", type=float,
                    help="readings at or above this are no return (default: the log's "
                         "largest reading)")
+    c.add_argument("--scan-rate", type=float, metavar="HZ",
+                   help="place the scans at this rate in the log's order, from the first "
+                        "scan's time, and the odometry evenly between them: for a log "
+                        "whose times do not advance (printed with too few digits)")
     u = kinds.add_parser("utias", help="one robot of a UTIAS MRCLAM dataset folder")
     u.add_argument("dataset", type=Path)
     u.add_argument("--robot", type=int, required=True)
@@ -181,6 +192,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     if args.kind == "carmen" and args.range_max is not None \
             and not (math.isfinite(args.range_max) and args.range_max > 0):
         parser.error("--range-max must be a finite number > 0")
+    if args.kind == "carmen" and args.scan_rate is not None \
+            and not (math.isfinite(args.scan_rate) and args.scan_rate > 0):
+        parser.error("--scan-rate must be a finite number > 0")
     return args
 
 
@@ -188,7 +202,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parse_args(argv)
     try:
         if args.kind == "carmen":
-            lines = import_carmen(args.log, args.output, args.range_max)
+            lines = import_carmen(args.log, args.output, args.range_max, args.scan_rate)
         else:
             lines = import_utias(args.dataset, args.robot, args.output, args.landmarks_file)
     except (carmen.LogError, utias.DatasetError, RecordingError) as error:
