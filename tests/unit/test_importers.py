@@ -276,6 +276,95 @@ def test_the_intel_log_printed_with_g_is_refused_then_read_at_a_scan_rate(tmp_pa
         == pytest.approx(0.1, abs=1e-6)
 
 
+def flaser_only_log(odometry: list[tuple[float, float, float]]) -> str:
+    """Three scans whose laser poses are CORRECTED-like and whose odometry fields are
+    ``odometry``, and no ODOM line (a raw SLAM-benchmark .clf log has this shape)."""
+    poses = [(0.0, 0.0, 0.0), (1.1, 0.05, 0.12), (2.7, 1.2, 0.85)]
+    lines = ["PARAM robot_frontlaser_offset 0.0 nohost 0"]
+    for t, (x, y, th), (ox, oy, oth) in zip((10.0, 10.5, 11.0), poses, odometry):
+        lines.append(f"FLASER 3 1.5 2.5 3.5 {x} {y} {th} {ox} {oy} {oth} {t} h {t}")
+    return "\n".join(lines) + "\n"
+
+
+def test_a_flaser_only_log_gives_its_odometry_from_the_odometry_fields(tmp_path, capsys):
+    path = tmp_path / "run.clf"
+    path.write_text(flaser_only_log(RAW[:3]))
+    out = tmp_path / "run.mcap"
+    cli.main(["carmen", str(path), "-o", str(out)])
+    printed = capsys.readouterr().out
+    assert "/odom from the scan lines' odometry fields" in printed
+    assert "no /ground_truth" not in printed
+    topics = decoded(out)
+    odom = [m for _, m in topics["/odom"]]
+    assert [stamp(m) for m in odom] == pytest.approx([10.0, 10.5, 11.0])
+    np.testing.assert_allclose([(m.pose.pose.position.x, m.pose.pose.position.y,
+                                 2 * math.atan2(m.pose.pose.orientation.z,
+                                                m.pose.pose.orientation.w)) for m in odom],
+                               RAW[:3], atol=1e-9)
+    assert odom[1].twist.twist.linear.x == 0.0          # FLASER carries no velocities
+    truth = [m for _, m in topics["/ground_truth"]]
+    assert [m.pose.position.x for m in truth] == pytest.approx([0.0, 1.1, 2.7])
+
+
+def test_a_log_whose_laser_pose_is_its_odometry_is_raw_and_has_no_truth(tmp_path, capsys):
+    path = tmp_path / "run.clf"
+    poses = [(0.0, 0.0, 0.0), (1.1, 0.05, 0.12), (2.7, 1.2, 0.85)]
+    path.write_text(flaser_only_log(poses))
+    out = tmp_path / "run.mcap"
+    cli.main(["carmen", str(path), "-o", str(out)])
+    assert "no /ground_truth: the laser pose equals the odometry pose on every scan line" \
+        in capsys.readouterr().out
+    topics = decoded(out)
+    assert sorted(topics) == ["/odom", "/scan"] and len(topics["/scan"]) == 3
+    # with ODOM lines that never restart at a scan: raw too, the ODOM poses as they are
+    text = path.read_text() + "ODOM 3.0 1.5 0.9 0.3 0.1 0 11.2 h 11.2\n"
+    path.write_text(text)
+    log = carmen.read_log(path)
+    assert not log.corrected and not log.odometry_from_scans
+    assert [o.pose for o in log.odometry] == [(3.0, 1.5, 0.9)]
+    # one scan whose laser pose is not its odometry's: corrected
+    path.write_text(text.replace("2.7 1.2 0.85 2.7", "2.75 1.2 0.85 2.7"))
+    assert carmen.read_log(path).corrected
+
+
+def without_odom(raw_at_scans: list | None = None):
+    """The ODOM lines dropped; with ``raw_at_scans``, each FLASER's odometry fields set to
+    the raw odometry at that scan (the laser pose stays the corrected one)."""
+    scans = iter(raw_at_scans or [])
+
+    def rewrite(tokens: list[str], restart: bool) -> list[str] | None:
+        if tokens[0] == "ODOM":
+            return None
+        if tokens[0] == "FLASER" and raw_at_scans is not None:
+            at = 2 + int(tokens[1]) + 3
+            return tokens[:at] + [repr(v) for v in next(scans)] + tokens[at + 3:]
+        return tokens
+    return rewrite
+
+
+@needs_shared
+def test_the_intel_log_without_odom_lines_is_raw_or_corrected_by_its_fields(tmp_path):
+    intel = SHARED / "carmen" / "intel-corrected.log.gz"
+    # the corrected log's odometry fields repeat the corrected pose: without its ODOM
+    # lines (the restarts), nothing says it was corrected
+    log = carmen.read_log(intel_with(tmp_path, without_odom()))
+    assert not log.corrected and log.odometry_from_scans
+    assert {o.t: o.pose for o in log.odometry} == {s.t: s.pose for s in log.scans}
+    # the raw odometry at each scan copied into the fields: corrected, with its drift
+    placed = carmen.read_log(intel, scan_rate=10.0)     # the restart lines at the scans
+    at = {o.t: o.pose for o in placed.odometry}
+    raw = [at[s.t] for s in placed.scans]
+    log = carmen.read_log(intel_with(tmp_path, without_odom(raw)))
+    assert log.corrected and log.odometry_from_scans and len(log.odometry) == 910
+    odometry = {o.t: o.pose for o in log.odometry}
+    np.testing.assert_allclose([odometry[s.t] for s in log.scans], raw, atol=1e-12)
+    first, last = log.scans[0], log.scans[-1]
+    dead_reckoned = carmen.compose(first.pose, carmen.relative(odometry[first.t],
+                                                               odometry[last.t]))
+    assert 50 < math.hypot(dead_reckoned[0] - last.pose[0], dead_reckoned[1] - last.pose[1]) \
+        < 75
+
+
 # --- UTIAS -------------------------------------------------------------------------------
 
 HEADER = "# UTIAS\n# by\n# format\n# columns\n"

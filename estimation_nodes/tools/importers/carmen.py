@@ -14,6 +14,13 @@ The restart line is the first ODOM after a scan with that scan's pose and a time
 order and then sorted by time, stably, so that no line is lost when the log's time runs
 back; ``odometry_reordered`` counts the lines that sort moved.
 
+A log without ODOM lines (the SLAM benchmark's raw ``.clf`` logs have FLASER lines
+only) gives its odometry from the scan lines' own odometry fields (``odom_x odom_y
+odom_theta``), at the scans' times, with no velocities (FLASER has none). A log is raw,
+not corrected, when nothing in it says otherwise: no restart line, and the laser pose
+equal to the odometry pose (to ``SAME_POSE_M`` and ``SAME_POSE_RAD``, what a log prints)
+on every scan line; ``corrected`` is then False and the log has no truth.
+
 Times that do not advance: some corrected logs print every time with six significant
 digits (``1.13486e+09``), so that a whole log has one stamp or a few. A log with fewer
 distinct scan times than half its scans (``STALLED_FRACTION``) is refused, naming
@@ -41,6 +48,8 @@ Pose = tuple[float, float, float]
 #: A log whose distinct scan times are fewer than this share of its scans has times that
 #: do not advance (printed with too few digits): refused unless a scan rate is given.
 STALLED_FRACTION = 0.5
+#: The laser pose and the odometry pose of a scan line count as the same within these.
+SAME_POSE_M, SAME_POSE_RAD = 0.005, 0.005
 
 
 class LogError(Exception):
@@ -53,6 +62,11 @@ class Scan:
     ranges: np.ndarray
     #: The pose the log gives with the scan (the SLAM-corrected one in a corrected log).
     pose: Pose
+    #: The odometry pose on the scan line (FLASER's odom_x odom_y odom_theta).
+    odom_pose: Pose
+    #: The velocities on the scan line (FLASER has none: 0).
+    tv: float = 0.0
+    rv: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -76,6 +90,10 @@ class CarmenLog:
     odometry_reordered: int = 0
     #: The rate the scans were placed at (``read_log``'s ``scan_rate``), if one was given.
     scan_rate: float | None = None
+    #: False for a raw log (see the module's docstring): its scan poses are no truth.
+    corrected: bool = True
+    #: The odometry came from the scan lines' odometry fields: the log has no ODOM line.
+    odometry_from_scans: bool = False
 
     @property
     def max_reading(self) -> float:
@@ -108,8 +126,9 @@ def _flaser(tokens: list[str]) -> Scan | None:
     values = _numbers(tokens[2:2 + n + 7])
     if n == 0 or values is None or len(values) != n + 7 or any(r < 0 for r in values[:n]):
         return None
-    x, y, theta = values[n:n + 3]
-    return Scan(values[n + 6], np.array(values[:n], dtype=np.float32), (x, y, theta))
+    x, y, theta, odom_x, odom_y, odom_theta = values[n:n + 6]
+    return Scan(values[n + 6], np.array(values[:n], dtype=np.float32), (x, y, theta),
+                (odom_x, odom_y, odom_theta))
 
 
 def _odom(tokens: list[str]) -> tuple[Pose, float, float, float] | None:
@@ -162,6 +181,11 @@ def read_log(path: Path, scan_rate: float | None = None) -> CarmenLog:
             pose = compose(raw_at_scan, relative(restart, pose))
         last_raw = pose
         log.odometry.append(OdometrySample(t, pose, record.tv, record.rv))
+    if not any(isinstance(r, _OdomLine) for r in records):
+        log.odometry_from_scans = True
+        log.odometry = [OdometrySample(s.t, s.odom_pose, s.tv, s.rv) for s in log.scans]
+    log.corrected = any(isinstance(r, _OdomLine) and r.restart for r in records) \
+        or not all(_same_pose(s.pose, s.odom_pose) for s in log.scans)
     log.odometry_reordered = _out_of_order(log.odometry)
     log.odometry.sort(key=lambda sample: sample.t)
     return log
@@ -223,6 +247,11 @@ def _placed_at(records: list[Scan | _OdomLine], rate: float) -> list[Scan | _Odo
             between.append(record)
     spread(scan_t + period)
     return placed
+
+
+def _same_pose(a: Pose, b: Pose) -> bool:
+    return math.hypot(a[0] - b[0], a[1] - b[1]) <= SAME_POSE_M \
+        and abs(math.remainder(a[2] - b[2], math.tau)) <= SAME_POSE_RAD
 
 
 def _restarts(scan: Scan, pose: Pose, t: float) -> bool:

@@ -6,10 +6,11 @@ writes, so that estimation_play, estimation_replay, ros2 bag and Foxglove read i
 
 CARMEN: /scan (sensor_msgs/LaserScan with the log's angles and range_max, frame
 ``laser``), /odom (nav_msgs/Odometry at every odometry line: the raw odometry pose
-and twist, ``odom`` -> ``base_link``), /ground_truth (geometry_msgs/PoseStamped in
-``map``: the log's corrected pose at each scan). UTIAS: /odom (the twist, and the
-pose it dead-reckons), /landmark_observations (sensor_msgs/PointCloud2, one per
-camera frame: x = range cos(bearing), y = range sin(bearing), z = 0, id = the
+and twist, ``odom`` -> ``base_link``; from the scan lines' odometry fields in a log
+without ODOM lines), /ground_truth (geometry_msgs/PoseStamped in ``map``: the log's
+corrected pose at each scan; none for a raw log, see ``carmen``). UTIAS: /odom (the
+twist, and the pose it dead-reckons), /landmark_observations (sensor_msgs/PointCloud2,
+one per camera frame: x = range cos(bearing), y = range sin(bearing), z = 0, id = the
 landmark's subject number), /ground_truth (Vicon), and a landmarks file (YAML).
 Every message is stamped with the log's time (CARMEN: with ``--scan-rate``, the scans at
 that rate in the log's order and the odometry evenly between them, for a log whose times
@@ -78,8 +79,10 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None,
 
     log = carmen.read_log(log_path, scan_rate)
     limit = log.max_reading if range_max is None else range_max
-    writer = _Writer(out, {"/scan": LASER_SCAN, "/odom": ODOMETRY,
-                           "/ground_truth": POSE_STAMPED}, str(log_path))
+    topics = {"/scan": LASER_SCAN, "/odom": ODOMETRY}
+    if log.corrected:
+        topics["/ground_truth"] = POSE_STAMPED
+    writer = _Writer(out, topics, str(log_path))
     for scan in log.scans:
         n = scan.ranges.size
         msg = LaserScan()
@@ -89,6 +92,8 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None,
         msg.range_min, msg.range_max = 0.0, float(limit)
         msg.ranges = scan.ranges.tolist()
         writer.add("/scan", scan.t, msg)
+        if not log.corrected:
+            continue
         truth = PoseStamped()
         _stamp(truth.header, scan.t, "map")
         fill_pose(truth.pose, *scan.pose)
@@ -107,6 +112,13 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None,
         notes.append(f"times placed at {scan_rate:g} Hz from {log.scans[0].t:.3f} s "
                      f"(--scan-rate): the scans in the log's order, the odometry evenly "
                      f"between them")
+    if log.odometry_from_scans:
+        notes.append("/odom from the scan lines' odometry fields (the log has no ODOM "
+                     "line; no velocities)")
+    if not log.corrected:
+        notes.append("no /ground_truth: the laser pose equals the odometry pose on every "
+                     "scan line and the odometry never restarts at a scan (a raw log, not "
+                     "corrected)")
     if log.odometry_reordered:
         notes.append(f"{log.odometry_reordered} odometry lines reordered by time (the "
                      f"log's time ran back; every line kept, sorted stably by time)")
