@@ -365,6 +365,90 @@ def test_the_intel_log_without_odom_lines_is_raw_or_corrected_by_its_fields(tmp_
         < 75
 
 
+def robotlaser(ranges, remissions, laser_pose, robot_pose, t, tail="0.3 0.1 0.5 0.2 0.0"):
+    """A ROBOTLASER1 line in CARMEN's layout (writelog.c); ``tail``: tv rv
+    forward_safety_dist side_safety_dist turn_axis."""
+    return " ".join(["ROBOTLASER1 0 -1.0 1.5 0.5 30 0.01 0",
+                     str(len(ranges)), *map(str, ranges), str(len(remissions)),
+                     *map(str, remissions), *map(repr, laser_pose), *map(repr, robot_pose),
+                     tail, repr(t), "myhost", repr(t + 0.001)])
+
+
+MOUNT = (0.2, 0.0, 0.0)
+
+
+def test_robotlaser1_lines_are_read_with_the_lasers_own_angles_and_range(tmp_path, capsys):
+    path = tmp_path / "run.log"
+    lines = [robotlaser([1.0, 30.0, 2.5], [100, 0, 7], carmen.compose(raw, MOUNT), raw, t)
+             for t, raw in zip((5.0, 5.1, 5.2), RAW)]
+    path.write_text("# ROBOTLASER1 in CARMEN's layout\n" + "\n".join(lines) + "\n")
+    out = tmp_path / "run.mcap"
+    cli.main(["carmen", str(path), "-o", str(out)])
+    printed = capsys.readouterr().out
+    assert "range_max 30 m (the laser's maximum_range)" in printed
+    assert "/odom from the scan lines' odometry fields" in printed
+    # the laser sits 0.2 m ahead of the robot on every line, nothing corrects it: raw
+    assert "no /ground_truth: the laser pose is the odometry pose moved by one fixed mount " \
+        "(x 0.200 m, y 0.000 m, yaw 0.0000 rad)" in printed
+    topics = decoded(out)
+    assert sorted(topics) == ["/odom", "/scan"]
+    scan = topics["/scan"][1][1]
+    assert stamp(scan) == pytest.approx(5.1)
+    assert scan.angle_min == pytest.approx(-1.0) and scan.range_max == pytest.approx(30)
+    assert scan.angle_increment == pytest.approx(0.5) and scan.angle_max == pytest.approx(0.0)
+    np.testing.assert_allclose(scan.ranges, [1.0, 30.0, 2.5])
+    np.testing.assert_allclose(scan.intensities, [100, 0, 7])
+    odom = [m for _, m in topics["/odom"]]
+    np.testing.assert_allclose([(m.pose.pose.position.x, m.pose.pose.position.y)
+                                for m in odom], [r[:2] for r in RAW[:3]], atol=1e-9)
+    assert odom[2].twist.twist.linear.x == pytest.approx(0.3)
+    assert odom[2].twist.twist.angular.z == pytest.approx(0.1)
+
+
+def test_a_robotlaser1_line_in_another_layout_is_malformed(tmp_path, capsys):
+    # One more number before the timestamp (a "turn safety distance"): the host would
+    # be read from a number; counted, never guessed at.
+    path = tmp_path / "run.log"
+    six = robotlaser([1.0, 2.0], [], (0, 0, 0), (0, 0, 0), 5.0, "0.3 0.1 0.5 0.2 0.4 0.0")
+    path.write_text(six + "\n" + robotlaser([1.0], [], (0, 0, 0), (0, 0, 0), 5.1) + "\n")
+    log = carmen.read_log(path)
+    assert len(log.scans) == 1 and log.left_out == {"malformed ROBOTLASER1 lines": 1}
+    assert log.scans[0].remissions.size == 0 and log.scans[0].t == 5.1
+    path.write_text(six + "\n" + six.replace("ROBOTLASER1 0", "ROBOTLASER1 x") + "\n")
+    with pytest.raises(SystemExit) as ended:
+        cli.main(["carmen", str(path), "-o", str(tmp_path / "run.mcap")])
+    assert ended.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no scan line could be read (2 malformed" in err
+
+
+def as_robotlaser1(tokens: list[str], restart: bool) -> list[str]:
+    """A FLASER line as the ROBOTLASER1 line of the same scan (180 beams of 1 degree)."""
+    if tokens[0] != "FLASER":
+        return tokens
+    n = int(tokens[1])
+    ranges, poses, rest = tokens[2:2 + n], tokens[2 + n:2 + n + 6], tokens[2 + n + 6:]
+    return ["ROBOTLASER1", "0", repr(-math.pi / 2), repr(math.pi), repr(math.pi / n),
+            "81.83", "0.01", "0", str(n), *ranges, "0", *poses,
+            "0", "0", "0.5", "0.2", "0", *rest]
+
+
+@needs_shared
+def test_the_intel_log_as_robotlaser1_reads_as_its_flaser_lines(tmp_path):
+    original = carmen.read_log(SHARED / "carmen" / "intel-corrected.log.gz")
+    log = carmen.read_log(intel_with(tmp_path, as_robotlaser1))
+    assert log.left_out == {} and log.corrected and len(log.scans) == 910
+    assert [s.t for s in log.scans] == [s.t for s in original.scans]
+    assert [s.pose for s in log.scans] == [s.pose for s in original.scans]
+    np.testing.assert_array_equal(np.stack([s.ranges for s in log.scans]),
+                                  np.stack([s.ranges for s in original.scans]))
+    assert all(s.angle_min == -math.pi / 2 and s.angle_increment == pytest.approx(math.pi / 180)
+               for s in log.scans)
+    # the ODOM lines restart after each ROBOTLASER1 as after each FLASER
+    assert log.odometry == original.odometry and log.odometry_reordered == 840
+    assert log.laser_range_max == 81.83
+
+
 # --- UTIAS -------------------------------------------------------------------------------
 
 HEADER = "# UTIAS\n# by\n# format\n# columns\n"

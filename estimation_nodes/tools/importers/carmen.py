@@ -14,12 +14,30 @@ The restart line is the first ODOM after a scan with that scan's pose and a time
 order and then sorted by time, stably, so that no line is lost when the log's time runs
 back; ``odometry_reordered`` counts the lines that sort moved.
 
+``ROBOTLASER1``, the newer format, is read in the layout CARMEN's own logger writes and
+reads it (``carmen_logwrite_write_robot_laser`` in ``src/logger/writelog.c`` and
+``carmen_string_to_robot_laser_message`` in ``src/logger/readlog.c``; GMapping's and the
+Freiburg course's readers agree)::
+
+    ROBOTLASER1 laser_type start_angle field_of_view angular_resolution maximum_range
+        accuracy remission_mode num_readings [range_readings] num_remissions
+        [remission_values] laser_pose_x laser_pose_y laser_pose_theta robot_pose_x
+        robot_pose_y robot_pose_theta tv rv forward_safety_dist side_safety_dist
+        turn_axis timestamp host logger_timestamp
+
+Beam i is at ``start_angle + i angular_resolution`` (field_of_view is not needed), the
+remissions are the scan's intensities when there is one per beam, the laser pose is the
+scan's pose and the robot pose its odometry pose, with tv and rv. A line whose token
+after the timestamp is a number is another layout and is counted as malformed.
+
 A log without ODOM lines (the SLAM benchmark's raw ``.clf`` logs have FLASER lines
-only) gives its odometry from the scan lines' own odometry fields (``odom_x odom_y
-odom_theta``), at the scans' times, with no velocities (FLASER has none). A log is raw,
-not corrected, when nothing in it says otherwise: no restart line, and the laser pose
-equal to the odometry pose (to ``SAME_POSE_M`` and ``SAME_POSE_RAD``, what a log prints)
-on every scan line; ``corrected`` is then False and the log has no truth.
+only) gives its odometry from the scan lines' own odometry fields (FLASER's ``odom_x
+odom_y odom_theta``, ROBOTLASER1's robot pose and velocities) at the scans' times, with
+no velocities from FLASER (it has none). A log is raw, not corrected, when nothing in it
+says otherwise: no restart line, and on every scan line the laser pose equal to the
+odometry pose moved by one fixed mount (none for a laser at the robot's centre, as the
+FLASER logs have it), to ``SAME_POSE_M`` and ``SAME_POSE_RAD`` (what a log prints);
+``corrected`` is then False, ``mount`` that offset, and the log has no truth.
 
 Times that do not advance: some corrected logs print every time with six significant
 digits (``1.13486e+09``), so that a whole log has one stamp or a few. A log with fewer
@@ -60,13 +78,21 @@ class LogError(Exception):
 class Scan:
     t: float
     ranges: np.ndarray
+    #: Beam i at ``angle_min + i angle_increment`` in the laser's frame.
+    angle_min: float
+    angle_increment: float
     #: The pose the log gives with the scan (the SLAM-corrected one in a corrected log).
     pose: Pose
-    #: The odometry pose on the scan line (FLASER's odom_x odom_y odom_theta).
+    #: The odometry pose on the scan line (FLASER's odom_x odom_y odom_theta,
+    #: ROBOTLASER1's robot pose).
     odom_pose: Pose
     #: The velocities on the scan line (FLASER has none: 0).
     tv: float = 0.0
     rv: float = 0.0
+    #: The laser's own maximum range (ROBOTLASER1; FLASER gives none).
+    range_max: float | None = None
+    #: One remission (intensity) per beam, or none.
+    remissions: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.float32))
 
 
 @dataclass(frozen=True)
@@ -94,10 +120,18 @@ class CarmenLog:
     corrected: bool = True
     #: The odometry came from the scan lines' odometry fields: the log has no ODOM line.
     odometry_from_scans: bool = False
+    #: A raw log's fixed laser pose in the odometry pose's frame (0, 0, 0: at its centre).
+    mount: Pose | None = None
 
     @property
     def max_reading(self) -> float:
         return max(float(scan.ranges.max()) for scan in self.scans)
+
+    @property
+    def laser_range_max(self) -> float | None:
+        """The least maximum range the scan lines give, if every one gives one."""
+        limits = [scan.range_max for scan in self.scans]
+        return None if None in limits else min(limit for limit in limits if limit is not None)
 
 
 def _lines(path: Path) -> list[str]:
@@ -127,8 +161,38 @@ def _flaser(tokens: list[str]) -> Scan | None:
     if n == 0 or values is None or len(values) != n + 7 or any(r < 0 for r in values[:n]):
         return None
     x, y, theta, odom_x, odom_y, odom_theta = values[n:n + 6]
-    return Scan(values[n + 6], np.array(values[:n], dtype=np.float32), (x, y, theta),
-                (odom_x, odom_y, odom_theta))
+    return Scan(values[n + 6], np.array(values[:n], dtype=np.float32), -math.pi / 2,
+                math.pi / n, (x, y, theta), (odom_x, odom_y, odom_theta))
+
+
+def _robotlaser(tokens: list[str]) -> Scan | None:
+    """A ROBOTLASER1 line in CARMEN's layout (the module's docstring)."""
+    head = _numbers(tokens[1:8])
+    if head is None or len(head) != 7 or len(tokens) < 10 or not tokens[8].isdigit():
+        return None
+    _type, start, _fov, resolution, max_range, _accuracy, _mode = head
+    n = int(tokens[8])
+    at = 9 + n                           # num_remissions
+    if n == 0 or len(tokens) <= at or not tokens[at].isdigit():
+        return None
+    m = int(tokens[at])
+    tail = at + 1 + m                    # laser_pose_x
+    values = _numbers(tokens[9:at] + tokens[at + 1:tail + 12])
+    host = tokens[tail + 12] if len(tokens) > tail + 12 else None
+    if values is None or len(values) != n + m + 12 or host is None \
+            or _numbers([host]) is not None or resolution == 0 or max_range <= 0 \
+            or any(r < 0 for r in values[:n]):
+        return None
+    remissions = values[n:n + m] if m == n else []
+    laser_x, laser_y, laser_theta, robot_x, robot_y, robot_theta, tv, rv = \
+        values[n + m:n + m + 8]
+    return Scan(values[n + m + 11], np.array(values[:n], dtype=np.float32), start,
+                resolution, (laser_x, laser_y, laser_theta), (robot_x, robot_y, robot_theta),
+                tv, rv, max_range, np.array(remissions, dtype=np.float32))
+
+
+#: The scan lines read, by kind.
+SCAN_LINES = {"FLASER": _flaser, "ROBOTLASER1": _robotlaser}
 
 
 def _odom(tokens: list[str]) -> tuple[Pose, float, float, float] | None:
@@ -156,7 +220,11 @@ def read_log(path: Path, scan_rate: float | None = None) -> CarmenLog:
     records, left_out = _records(Path(path))
     scans = [r for r in records if isinstance(r, Scan)]
     if not scans:
-        raise LogError(f"{path}: no FLASER line: not a CARMEN laser log")
+        malformed = sum(left_out[f"malformed {kind} lines"] for kind in SCAN_LINES)
+        if malformed:
+            raise LogError(f"{path}: no scan line could be read ({malformed} malformed "
+                           f"FLASER or ROBOTLASER1 lines)")
+        raise LogError(f"{path}: no FLASER or ROBOTLASER1 line: not a CARMEN laser log")
     if scan_rate is not None:
         records = _placed_at(records, scan_rate)
     else:
@@ -184,8 +252,12 @@ def read_log(path: Path, scan_rate: float | None = None) -> CarmenLog:
     if not any(isinstance(r, _OdomLine) for r in records):
         log.odometry_from_scans = True
         log.odometry = [OdometrySample(s.t, s.odom_pose, s.tv, s.rv) for s in log.scans]
-    log.corrected = any(isinstance(r, _OdomLine) and r.restart for r in records) \
-        or not all(_same_pose(s.pose, s.odom_pose) for s in log.scans)
+    mount = relative(log.scans[0].odom_pose, log.scans[0].pose)
+    if any(isinstance(r, _OdomLine) and r.restart for r in records) \
+            or not all(_same_pose(relative(s.odom_pose, s.pose), mount) for s in log.scans):
+        log.corrected = True
+    else:
+        log.corrected, log.mount = False, mount
     log.odometry_reordered = _out_of_order(log.odometry)
     log.odometry.sort(key=lambda sample: sample.t)
     return log
@@ -200,10 +272,10 @@ def _records(path: Path) -> tuple[list[Scan | _OdomLine], Counter[str]]:
         tokens = line.split()
         if not tokens or tokens[0].startswith("#") or tokens[0] in ("PARAM", "NEFF", "SYNC"):
             continue
-        if tokens[0] == "FLASER":
-            scan = _flaser(tokens)
+        if tokens[0] in SCAN_LINES:
+            scan = SCAN_LINES[tokens[0]](tokens)
             if scan is None:
-                left_out["malformed FLASER lines"] += 1
+                left_out[f"malformed {tokens[0]} lines"] += 1
                 continue
             records.append(scan)
             last_scan = scan

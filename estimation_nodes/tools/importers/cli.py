@@ -4,10 +4,11 @@ writes, so that estimation_play, estimation_replay, ros2 bag and Foxglove read i
     estimation_import carmen LOG -o run.mcap [--range-max M] [--scan-rate HZ]
     estimation_import utias DATASET_DIR --robot N -o run.mcap [--landmarks-file FILE]
 
-CARMEN: /scan (sensor_msgs/LaserScan with the log's angles and range_max, frame
-``laser``), /odom (nav_msgs/Odometry at every odometry line: the raw odometry pose
-and twist, ``odom`` -> ``base_link``; from the scan lines' odometry fields in a log
-without ODOM lines), /ground_truth (geometry_msgs/PoseStamped in ``map``: the log's
+CARMEN (FLASER or ROBOTLASER1 scans): /scan (sensor_msgs/LaserScan with the log's
+angles, range_max and remissions as intensities, frame ``laser``), /odom
+(nav_msgs/Odometry at every odometry line: the raw odometry pose and twist, ``odom`` ->
+``base_link``; from the scan lines' odometry fields in a log without ODOM lines),
+/ground_truth (geometry_msgs/PoseStamped in ``map``: the log's
 corrected pose at each scan; none for a raw log, see ``carmen``). UTIAS: /odom (the
 twist, and the pose it dead-reckons), /landmark_observations (sensor_msgs/PointCloud2,
 one per camera frame: x = range cos(bearing), y = range sin(bearing), z = 0, id = the
@@ -78,7 +79,11 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None,
     from sensor_msgs.msg import LaserScan
 
     log = carmen.read_log(log_path, scan_rate)
-    limit = log.max_reading if range_max is None else range_max
+    limit, origin = log.max_reading, "the log's largest reading"
+    if range_max is not None:
+        limit, origin = range_max, "given"
+    elif log.laser_range_max is not None and log.laser_range_max <= limit:
+        limit, origin = log.laser_range_max, "the laser's maximum_range"
     topics = {"/scan": LASER_SCAN, "/odom": ODOMETRY}
     if log.corrected:
         topics["/ground_truth"] = POSE_STAMPED
@@ -87,10 +92,11 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None,
         n = scan.ranges.size
         msg = LaserScan()
         _stamp(msg.header, scan.t, "laser")
-        msg.angle_min, msg.angle_increment = -math.pi / 2, math.pi / n
+        msg.angle_min, msg.angle_increment = scan.angle_min, scan.angle_increment
         msg.angle_max = msg.angle_min + (n - 1) * msg.angle_increment
         msg.range_min, msg.range_max = 0.0, float(limit)
         msg.ranges = scan.ranges.tolist()
+        msg.intensities = scan.remissions.tolist()
         writer.add("/scan", scan.t, msg)
         if not log.corrected:
             continue
@@ -106,7 +112,6 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None,
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = sample.tv, sample.rv
         writer.add("/odom", sample.t, odom)
     writer.close()
-    origin = "given" if range_max is not None else "the log's largest reading"
     notes = [f"range_max {limit:g} m ({origin})"]
     if scan_rate is not None:
         notes.append(f"times placed at {scan_rate:g} Hz from {log.scans[0].t:.3f} s "
@@ -114,11 +119,14 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None,
                      f"between them")
     if log.odometry_from_scans:
         notes.append("/odom from the scan lines' odometry fields (the log has no ODOM "
-                     "line; no velocities)")
-    if not log.corrected:
-        notes.append("no /ground_truth: the laser pose equals the odometry pose on every "
-                     "scan line and the odometry never restarts at a scan (a raw log, not "
-                     "corrected)")
+                     "line)")
+    if log.mount is not None:
+        x, y, yaw = log.mount
+        how = "equals the odometry pose" if log.mount == (0.0, 0.0, 0.0) else (
+            f"is the odometry pose moved by one fixed mount (x {x:.3f} m, y {y:.3f} m, "
+            f"yaw {yaw:.4f} rad)")
+        notes.append(f"no /ground_truth: the laser pose {how} on every scan line and the "
+                     f"odometry never restarts at a scan (a raw log, not corrected)")
     if log.odometry_reordered:
         notes.append(f"{log.odometry_reordered} odometry lines reordered by time (the "
                      f"log's time ran back; every line kept, sorted stably by time)")
