@@ -16,8 +16,9 @@ back; ``odometry_reordered`` counts the lines that sort moved.
 
 ``ROBOTLASER1``, the newer format, is read in the layout CARMEN's own logger writes and
 reads it (``carmen_logwrite_write_robot_laser`` in ``src/logger/writelog.c`` and
-``carmen_string_to_robot_laser_message`` in ``src/logger/readlog.c``; GMapping's and the
-Freiburg course's readers agree)::
+``carmen_string_to_robot_laser_message`` in ``src/logger/readlog.c``, as in the public
+copy ``qh-huang/carmen``; the Freiburg robot-mapping course's ``read_robotlaser.m``
+agrees: five values between the robot pose and the timestamp)::
 
     ROBOTLASER1 laser_type start_angle field_of_view angular_resolution maximum_range
         accuracy remission_mode num_readings [range_readings] num_remissions
