@@ -202,6 +202,34 @@ def test_scan_rate_places_scans_in_log_order_and_odometry_between(tmp_path):
     assert log.odometry_reordered == 0
 
 
+@pytest.mark.parametrize("text, rate, error", [
+    ("FLASER 2 1 2 0 0 0 0 0 0 -5 h 0\nFLASER 2 1 2 0 0 0 0 0 0 1 h 1\n", None,
+     "a scan at -5 s"),
+    ("FLASER 2 1 2 0 0 0 0 0 0 1 h 1\nODOM 0 0 0 0 0 0 3e9 h 0\n", None,
+     "an odometry line at 3e+09 s"),
+    ("FLASER 2 1 2 0 0 0 0 0 0 1 h 1\nFLASER 2 1 2 0 0 0 0 0 0 1 h 1\n", "1e-300",
+     "a scan at 1e+300 s"),
+])
+def test_a_time_a_ros_stamp_cannot_hold_is_one_line(tmp_path, capsys, text, rate, error):
+    path = tmp_path / "run.log"
+    path.write_text(text)
+    with pytest.raises(SystemExit) as ended:
+        cli.main(["carmen", str(path), "-o", str(tmp_path / "run.mcap"),
+                  *(["--scan-rate", rate] if rate else [])])
+    assert ended.value.code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and error in err
+
+
+def test_scan_rate_puts_no_time_below_0(tmp_path):
+    path = tmp_path / "run.log"
+    path.write_text("ODOM 0 0 0 0 0 0 0 h 0\nFLASER 2 1 2 0 0 0 0 0 0 0 h 0\n"
+                    "ODOM 0.5 0 0 0 0 0 0 h 0\nFLASER 2 1 2 1 0 0 1 0 0 0 h 0\n")
+    log = carmen.read_log(path, scan_rate=4.0)
+    assert [s.t for s in log.scans] == [0.0, 0.25]
+    assert [o.t for o in log.odometry] == [0.0, 0.125]
+
+
 def test_scan_rate_is_a_finite_positive_rate(tmp_path, capsys):
     with pytest.raises(SystemExit) as ended:
         cli.main(["carmen", "run.log", "--scan-rate", "0", "-o", str(tmp_path / "r.mcap")])

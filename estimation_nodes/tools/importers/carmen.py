@@ -45,8 +45,9 @@ digits (``1.13486e+09``), so that a whole log has one stamp or a few. A log with
 distinct scan times than half its scans (``STALLED_FRACTION``) is refused, naming
 ``--scan-rate``; given a rate, ``read_log`` places the scans at it in the log's order from
 the first scan's time, and the odometry lines between two scans evenly between them
-(those before the first scan in the period before it, those after the last in the period
-after it).
+(those before the first scan in the period before it, from 0 at the earliest, those
+after the last in the period after it). A time a ROS stamp cannot hold (below 0, beyond
+2^31 - 1 s) is refused in one line.
 """
 
 from __future__ import annotations
@@ -69,6 +70,8 @@ Pose = tuple[float, float, float]
 STALLED_FRACTION = 0.5
 #: The laser pose and the odometry pose of a scan line count as the same within these.
 SAME_POSE_M, SAME_POSE_RAD = 0.005, 0.005
+#: The latest time a ROS stamp holds (builtin_interfaces/Time's sec is an int32).
+MAX_TIME_S = 2**31 - 1
 
 
 class LogError(Exception):
@@ -259,6 +262,7 @@ def read_log(path: Path, scan_rate: float | None = None) -> CarmenLog:
         log.corrected = True
     else:
         log.corrected, log.mount = False, mount
+    _check_times(Path(path), log)
     log.odometry_reordered = _out_of_order(log.odometry)
     log.odometry.sort(key=lambda sample: sample.t)
     return log
@@ -301,25 +305,38 @@ def _placed_at(records: list[Scan | _OdomLine], rate: float) -> list[Scan | _Odo
     start = next(r.t for r in records if isinstance(r, Scan))
     placed: list[Scan | _OdomLine] = []
     between: list[_OdomLine] = []        # the odometry lines since the last scan
-    scan_t = start - period              # the first scan's predecessor, were there one
+    scans = 0
 
-    def spread(until: float) -> None:
-        step = (until - scan_t) / (len(between) + 1)
-        placed.extend(replace(line, t=scan_t + (i + 1) * step)
+    def spread(low: float, high: float) -> None:
+        step = (high - low) / (len(between) + 1)
+        placed.extend(replace(line, t=low + (i + 1) * step)
                       for i, line in enumerate(between))
         between.clear()
 
     for record in records:
         if isinstance(record, Scan):
-            spread(scan_t + period)
-            scan_t += period
-            placed.append(replace(record, t=scan_t))
+            t = start + scans * period
+            # Before the first scan: the period before it, but no time below 0.
+            spread(max(t - period, 0.0) if scans == 0 else t - period, t)
+            placed.append(replace(record, t=t))
+            scans += 1
         elif record.restart:
             placed.append(record)            # takes its scan's time when rebuilt
         else:
             between.append(record)
-    spread(scan_t + period)
+    last = start + (scans - 1) * period
+    spread(last, last + period)
     return placed
+
+
+def _check_times(path: Path, log: CarmenLog) -> None:
+    """Every time is one a ROS stamp holds (its seconds are an int32 from 0)."""
+    for what, times in (("a scan", [s.t for s in log.scans]),
+                        ("an odometry line", [o.t for o in log.odometry])):
+        bad = next((t for t in times if not 0 <= t <= MAX_TIME_S), None)
+        if bad is not None:
+            raise LogError(f"{path}: {what} at {bad:g} s, outside what a ROS stamp holds "
+                           f"(0 to {MAX_TIME_S} s)")
 
 
 def _same_pose(a: Pose, b: Pose) -> bool:
