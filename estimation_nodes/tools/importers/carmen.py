@@ -85,7 +85,8 @@ class Scan:
     #: Beam i at ``angle_min + i angle_increment`` in the laser's frame.
     angle_min: float
     angle_increment: float
-    #: The pose the log gives with the scan (the SLAM-corrected one in a corrected log).
+    #: The laser's pose the log gives with the scan (FLASER's x y theta, ROBOTLASER1's
+    #: laser pose): the SLAM-corrected one in a corrected log.
     pose: Pose
     #: The odometry pose on the scan line (FLASER's odom_x odom_y odom_theta,
     #: ROBOTLASER1's robot pose).
