@@ -196,7 +196,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     c.add_argument("log", type=Path)
     c.add_argument("--range-max", type=float,
                    help="readings at or above this are no return (default: the log's "
-                        "largest reading)")
+                        "largest reading, or the laser's own maximum range where every "
+                        "ROBOTLASER1 line gives one not above it)")
     c.add_argument("--scan-rate", type=float, metavar="HZ",
                    help="place the scans at this rate in the log's order, from the first "
                         "scan's time, and the odometry evenly between them: for a log "
