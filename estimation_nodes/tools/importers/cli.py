@@ -1,18 +1,22 @@
 """estimation_import: a real robot's log as a ROS 2 recording (MCAP), in the layout --record
 writes, so that estimation_play, estimation_replay, ros2 bag and Foxglove read it.
 
-    estimation_import carmen LOG -o run.mcap [--range-max M]
+    estimation_import carmen LOG -o run.mcap [--range-max M] [--scan-rate HZ]
     estimation_import utias DATASET_DIR --robot N -o run.mcap [--landmarks-file FILE]
 
-CARMEN: /scan (sensor_msgs/LaserScan with the log's angles and range_max, frame
-``laser``), /odom (nav_msgs/Odometry at every odometry line: the raw odometry pose
-and twist, ``odom`` -> ``base_link``), /ground_truth (geometry_msgs/PoseStamped in
-``map``: the log's corrected pose at each scan). UTIAS: /odom (the twist, and the
-pose it dead-reckons), /landmark_observations (sensor_msgs/PointCloud2, one per
-camera frame: x = range cos(bearing), y = range sin(bearing), z = 0, id = the
+CARMEN (FLASER or ROBOTLASER1 scans): /scan (sensor_msgs/LaserScan with the log's
+angles, range_max and remissions as intensities, frame ``laser``), /odom
+(nav_msgs/Odometry at every odometry line: the raw odometry pose and twist, ``odom`` ->
+``base_link``; from the scan lines' odometry fields in a log without ODOM lines),
+/ground_truth (geometry_msgs/PoseStamped in ``map``: the log's
+corrected pose at each scan; none for a raw log, see ``carmen``). UTIAS: /odom (the
+twist, and the pose it dead-reckons), /landmark_observations (sensor_msgs/PointCloud2,
+one per camera frame: x = range cos(bearing), y = range sin(bearing), z = 0, id = the
 landmark's subject number), /ground_truth (Vicon), and a landmarks file (YAML).
-Every message is stamped with the log's time. What was left out is counted and
-reported; a log that cannot be read is one line and exit code 2.
+Every message is stamped with the log's time (CARMEN: with ``--scan-rate``, the scans at
+that rate in the log's order and the odometry evenly between them, for a log whose times
+do not advance). What was left out is counted and reported; a log that cannot be read is
+one line and exit code 2.
 """
 
 from __future__ import annotations
@@ -68,24 +72,34 @@ class _Writer:
         self._file.close()
 
 
-def import_carmen(log_path: Path, out: Path, range_max: float | None) -> list[str]:
+def import_carmen(log_path: Path, out: Path, range_max: float | None,
+                  scan_rate: float | None = None) -> list[str]:
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import LaserScan
 
-    log = carmen.read_log(log_path)
-    limit = log.max_reading if range_max is None else range_max
-    writer = _Writer(out, {"/scan": LASER_SCAN, "/odom": ODOMETRY,
-                           "/ground_truth": POSE_STAMPED}, str(log_path))
+    log = carmen.read_log(log_path, scan_rate)
+    limit, origin = log.max_reading, "the log's largest reading"
+    if range_max is not None:
+        limit, origin = range_max, "given"
+    elif log.laser_range_max is not None and log.laser_range_max <= limit:
+        limit, origin = log.laser_range_max, "the laser's maximum_range"
+    topics = {"/scan": LASER_SCAN, "/odom": ODOMETRY}
+    if log.corrected:
+        topics["/ground_truth"] = POSE_STAMPED
+    writer = _Writer(out, topics, str(log_path))
     for scan in log.scans:
         n = scan.ranges.size
         msg = LaserScan()
         _stamp(msg.header, scan.t, "laser")
-        msg.angle_min, msg.angle_increment = -math.pi / 2, math.pi / n
+        msg.angle_min, msg.angle_increment = scan.angle_min, scan.angle_increment
         msg.angle_max = msg.angle_min + (n - 1) * msg.angle_increment
         msg.range_min, msg.range_max = 0.0, float(limit)
         msg.ranges = scan.ranges.tolist()
+        msg.intensities = scan.remissions.tolist()
         writer.add("/scan", scan.t, msg)
+        if not log.corrected:
+            continue
         truth = PoseStamped()
         _stamp(truth.header, scan.t, "map")
         fill_pose(truth.pose, *scan.pose)
@@ -98,11 +112,24 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None) -> list[st
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = sample.tv, sample.rv
         writer.add("/odom", sample.t, odom)
     writer.close()
-    origin = "given" if range_max is not None else "the log's largest reading"
     notes = [f"range_max {limit:g} m ({origin})"]
-    if log.times_raised:
-        notes.append(f"{log.times_raised} odometry times raised to the one before "
-                     f"(the log's time ran back)")
+    if scan_rate is not None:
+        notes.append(f"times placed at {scan_rate:g} Hz from {log.scans[0].t:.3f} s "
+                     f"(--scan-rate): the scans in the log's order, the odometry evenly "
+                     f"between them")
+    if log.odometry_from_scans:
+        notes.append("/odom from the scan lines' odometry fields (the log has no ODOM "
+                     "line)")
+    if log.mount is not None:
+        x, y, yaw = log.mount
+        how = "equals the odometry pose" if log.mount == (0.0, 0.0, 0.0) else (
+            f"is the odometry pose moved by one fixed mount (x {x:.3f} m, y {y:.3f} m, "
+            f"yaw {yaw:.4f} rad)")
+        notes.append(f"no /ground_truth: the laser pose {how} on every scan line and the "
+                     f"odometry never restarts at a scan (a raw log, not corrected)")
+    if log.odometry_reordered:
+        notes.append(f"{log.odometry_reordered} odometry lines reordered by time (the "
+                     f"log's time ran back; every line kept, sorted stably by time)")
     return _report(writer.counts, log.left_out, notes)
 
 
@@ -169,7 +196,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     c.add_argument("log", type=Path)
     c.add_argument("--range-max", type=float,
                    help="readings at or above this are no return (default: the log's "
-                        "largest reading)")
+                        "largest reading, or the laser's own maximum range where every "
+                        "ROBOTLASER1 line gives one not above it)")
+    c.add_argument("--scan-rate", type=float, metavar="HZ",
+                   help="place the scans at this rate in the log's order, from the first "
+                        "scan's time, and the odometry evenly between them: for a log "
+                        "whose times do not advance (printed with too few digits)")
     u = kinds.add_parser("utias", help="one robot of a UTIAS MRCLAM dataset folder")
     u.add_argument("dataset", type=Path)
     u.add_argument("--robot", type=int, required=True)
@@ -181,6 +213,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     if args.kind == "carmen" and args.range_max is not None \
             and not (math.isfinite(args.range_max) and args.range_max > 0):
         parser.error("--range-max must be a finite number > 0")
+    if args.kind == "carmen" and args.scan_rate is not None \
+            and not (math.isfinite(args.scan_rate) and args.scan_rate > 0):
+        parser.error("--scan-rate must be a finite number > 0")
     return args
 
 
@@ -188,7 +223,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parse_args(argv)
     try:
         if args.kind == "carmen":
-            lines = import_carmen(args.log, args.output, args.range_max)
+            lines = import_carmen(args.log, args.output, args.range_max, args.scan_rate)
         else:
             lines = import_utias(args.dataset, args.robot, args.output, args.landmarks_file)
     except (carmen.LogError, utias.DatasetError, RecordingError) as error:
