@@ -40,6 +40,8 @@ NODE_MODULES = {
     "planar_robot": "estimation_nodes.nodes.planar_robot",
     "ekf_localizer": "estimation_nodes.nodes.ekf_localizer",
     "landmark_robot": "estimation_nodes.nodes.landmark_robot",
+    "ekf_node": "estimation_nodes.nodes.ekf_node",
+    "ukf_node": "estimation_nodes.nodes.ukf_node",
 }
 
 
@@ -148,6 +150,14 @@ def ekf_localizer() -> None:
 
 def landmark_robot() -> None:
     run_main(NODE_MODULES["landmark_robot"], 0)
+
+
+def ekf_node() -> None:
+    run_main(NODE_MODULES["ekf_node"], 0)
+
+
+def ukf_node() -> None:
+    run_main(NODE_MODULES["ukf_node"], 0)
 
 
 def _run_named() -> None:

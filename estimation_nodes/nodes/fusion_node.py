@@ -1,0 +1,160 @@
+"""``ekf_node`` and ``ukf_node``: robot_localization's nodes, taking its parameter files as
+they are, over the package's fusion core.
+
+Every parameter the file gives is taken (the node declares them from the overrides, as
+the peer's inputs odom0, odom1, ... are open-ended) and read with the peer's names and
+meanings (params/fusion.py); one the core does not act on yet is one warning line naming
+it. The inputs ``odomN`` (nav_msgs/Odometry), ``twistN``
+(geometry_msgs/TwistWithCovarianceStamped) and ``imuN`` (sensor_msgs/Imu) are queued as
+they come; a timer at ``frequency`` on the node's clock (``/clock`` with
+``use_sim_time``) runs the periodic update and publishes ``odometry/filtered``. A sensor
+frame other than ``base_link_frame`` needs its mount: ``sensor_mounts`` (this package's
+parameter, ["FRAME=x,y,z,roll,pitch,yaw", ...]) gives it until the tf listener lands.
+A message with a non-finite value in what it feeds is dropped and counted, so nothing
+NaN is ever published.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from nav_msgs.msg import Odometry
+from geometry_msgs.msg import TwistWithCovarianceStamped
+from rclpy.node import Node
+from rclpy.qos import qos_profile_sensor_data, QoSProfile
+from sensor_msgs.msg import Imu
+
+from estimation_nodes.core.fusion.filter import FusionFilter
+from estimation_nodes.core.fusion.inputs import Mount
+from estimation_nodes.core.fusion.sensors import SensorInputs
+from estimation_nodes.core.fusion.state import quaternion_from_rpy
+from estimation_nodes.nodes.parameters import ConfigurationError
+from estimation_nodes.nodes.process import main_for
+from estimation_nodes.params.fusion import FusionConfigError, fusion_config
+
+MESSAGE_TYPES = {"odom": Odometry, "twist": TwistWithCovarianceStamped, "imu": Imu}
+#: This package's own parameters (beyond robot_localization's).
+SENSOR_MOUNTS = "sensor_mounts"
+
+
+def parse_mounts(entries: Sequence[str]) -> dict[str, Mount]:
+    """``FRAME=x,y,z,roll,pitch,yaw`` entries (m, rad) as mounts by frame."""
+    mounts = {}
+    for entry in entries:
+        frame, _, numbers = entry.partition("=")
+        try:
+            values = [float(v) for v in numbers.split(",")]
+        except ValueError:
+            values = []
+        if not frame or len(values) != 6 or not all(math.isfinite(v) for v in values):
+            raise ConfigurationError(
+                f"{SENSOR_MOUNTS}: {entry!r}: expected FRAME=x,y,z,roll,pitch,yaw (m, rad)")
+        mounts[frame] = Mount.from_rpy(tuple(values[:3]), tuple(values[3:]))
+    return mounts
+
+
+class FusionNode(Node):
+    """One robot_localization filter node (``kind`` "ekf" or "ukf")."""
+
+    def __init__(self, kind: str = "ekf", **kwargs) -> None:
+        kwargs.setdefault("automatically_declare_parameters_from_overrides", True)
+        super().__init__(kwargs.pop("node_name", f"{kind}_filter_node"), **kwargs)
+        params = {name: p.value for name, p in self._parameters.items()}
+        try:
+            self._config = fusion_config(params, kind)
+            mounts = parse_mounts(params.get(SENSOR_MOUNTS, []) or [])
+        except FusionConfigError as error:
+            raise ConfigurationError(str(error)) from None
+        for name in self._config.unsupported:
+            self.get_logger().warning(f"parameter {name} is not supported yet: ignored")
+        self._fusion = FusionFilter(self._config.settings)
+        self._inputs = SensorInputs(dict(self._config.sensors), mounts,
+                                    self._config.base_link_frame, self._config.gravity)
+        self.dropped_non_finite = 0
+        self._last_published_ns = -1
+        self._publisher = self.create_publisher(Odometry, "odometry/filtered", 10)
+        self._subscriptions = [self._subscribe(sensor) for sensor in self._config.sensors.values()]
+        self._timer = self.create_timer(1.0 / self._config.frequency, self._on_timer)
+
+    def _subscribe(self, sensor):
+        qos = QoSProfile(depth=max(1, sensor.queue_size),
+                         reliability=qos_profile_sensor_data.reliability)
+
+        def on_message(msg) -> None:
+            if not _finite(msg):
+                self.dropped_non_finite += 1
+                self.get_logger().warning(
+                    f"{sensor.name} ({sensor.topic}): a non-finite value: message dropped",
+                    throttle_duration_sec=5.0)
+                return
+            self._inputs.add(sensor, msg, self._fusion)
+
+        return self.create_subscription(MESSAGE_TYPES[sensor.kind], sensor.topic,
+                                        on_message, qos)
+
+    def _on_timer(self) -> None:
+        now_ns = self.get_clock().now().nanoseconds
+        self._fusion.update(now_ns)
+        self._fusion.differentiate(now_ns)
+        if not self._fusion.initialized or self._fusion.last_time_ns <= self._last_published_ns:
+            return
+        if not (np.all(np.isfinite(self._fusion.x)) and np.all(np.isfinite(self._fusion.p))):
+            self.get_logger().error("the filter's state is not finite: resetting it")
+            self._fusion.reset()
+            return
+        self._last_published_ns = self._fusion.last_time_ns
+        self._publisher.publish(self._odometry())
+
+    def _odometry(self) -> Odometry:
+        x, p = self._fusion.x, self._fusion.p
+        msg = Odometry()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(self._fusion.last_time_ns,
+                                                                1_000_000_000)
+        msg.header.frame_id = self._config.world_frame
+        msg.child_frame_id = self._config.base_link_frame
+        pose = msg.pose.pose
+        pose.position.x, pose.position.y, pose.position.z = (float(v) for v in x[:3])
+        qx, qy, qz, qw = quaternion_from_rpy(*(float(v) for v in x[3:6]))
+        pose.orientation.x, pose.orientation.y = qx, qy
+        pose.orientation.z, pose.orientation.w = qz, qw
+        twist = msg.twist.twist
+        twist.linear.x, twist.linear.y, twist.linear.z = (float(v) for v in x[6:9])
+        twist.angular.x, twist.angular.y, twist.angular.z = (float(v) for v in x[9:12])
+        msg.pose.covariance = [float(v) for v in p[:6, :6].ravel()]
+        msg.twist.covariance = [float(v) for v in p[6:12, 6:12].ravel()]
+        return msg
+
+
+def _finite(msg) -> bool:
+    """Whether every number the fusion may read of ``msg`` is finite."""
+    if isinstance(msg, Imu):
+        values = [msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w,
+                  msg.angular_velocity.x, msg.angular_velocity.y, msg.angular_velocity.z,
+                  msg.linear_acceleration.x, msg.linear_acceleration.y,
+                  msg.linear_acceleration.z, *msg.orientation_covariance,
+                  *msg.angular_velocity_covariance, *msg.linear_acceleration_covariance]
+    else:
+        t = msg.twist.twist
+        values = [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z,
+                  *msg.twist.covariance]
+    return all(math.isfinite(v) for v in values)
+
+
+class EkfNode(FusionNode):
+    node_name = "ekf_filter_node"
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("ekf", **kwargs)
+
+
+class UkfNode(FusionNode):
+    node_name = "ukf_filter_node"
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__("ukf", **kwargs)
+
+
+ekf_main = main_for(EkfNode)
+ukf_main = main_for(UkfNode)

@@ -1,0 +1,90 @@
+"""ekf_node / ukf_node in-process: robot_localization's parameters in, odometry/filtered out,
+equal to the core's loop on the same messages; bad input dropped, never a NaN published."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from nav_msgs.msg import Odometry
+from rclpy.parameter import Parameter
+import rclpy.node
+from rclpy.qos import QoSProfile, qos_profile_sensor_data
+
+from estimation_nodes.nodes.fusion_node import FusionNode
+from estimation_nodes.nodes.parameters import ConfigurationError
+from tests.conftest import spin_until
+
+TWIST_CONFIG = [False] * 6 + [True, True, True, False, False, True] + [False] * 3
+
+
+def odom(t_ns: int, vx: float, wz: float) -> Odometry:
+    msg = Odometry()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+    msg.header.frame_id, msg.child_frame_id = "odom", "base_link"
+    msg.twist.twist.linear.x = vx
+    msg.twist.twist.angular.z = wz
+    msg.twist.covariance = list(np.diag([1e-3, 1e-3, 1e-3, 1e3, 1e3, 1e-2]).ravel())
+    return msg
+
+
+@pytest.fixture
+def fusion_node(context, executor):
+    made = []
+
+    def make(kind="ekf", **values):
+        values.setdefault("odom0", "wheel/odom")
+        values.setdefault("odom0_config", TWIST_CONFIG)
+        values.setdefault("frequency", 50.0)
+        node = FusionNode(kind, context=context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in values.items()])
+        executor.add_node(node)
+        made.append(node)
+        return node
+
+    yield make
+    for node in made:
+        node.destroy_node()
+
+
+@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+def test_odometry_in_gives_a_moving_finite_estimate_out(fusion_node, collector_factory,
+                                                        context, executor, kind):
+    node = fusion_node(kind)
+    collector = collector_factory({"odometry/filtered": (Odometry, QoSProfile(depth=100))})
+    sender = rclpy.node.Node("odom_source", context=context)
+    executor.add_node(sender)
+    publisher = sender.create_publisher(Odometry, "wheel/odom", qos_profile_sensor_data)
+    assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10.0)
+    t0 = node.get_clock().now().nanoseconds
+    sent = 0
+
+    def more() -> bool:
+        nonlocal sent
+        # One message per turn, stamped 20 ms apart from now on: 1 m/s forward.
+        publisher.publish(odom(t0 + sent * 20_000_000, 1.0, 0.0))
+        sent += 1
+        poses = collector.messages["odometry/filtered"]
+        return bool(poses) and poses[-1].pose.pose.position.x > 0.2
+
+    assert spin_until(executor, more, 30.0)
+    last = collector.messages["odometry/filtered"][-1]
+    assert last.header.frame_id == "odom" and last.child_frame_id == "base_link"
+    assert all(math.isfinite(v) for v in last.pose.covariance)
+    assert last.twist.twist.linear.x == pytest.approx(1.0, abs=0.05)
+
+
+def test_a_nan_reading_is_dropped_and_counted(fusion_node, context, executor):
+    node = fusion_node()
+    bad = odom(1_000_000_000, float("nan"), 0.0)
+    node._subscriptions[0].callback(bad)
+    assert node.dropped_non_finite == 1
+    assert node._fusion.queued == 0
+
+
+def test_a_bad_parameter_stops_the_node_with_its_name(fusion_node):
+    with pytest.raises(ConfigurationError, match="odom0_config: expected 15 booleans"):
+        fusion_node(odom0_config=[True, False])
+    with pytest.raises(ConfigurationError, match="sensor_mounts"):
+        fusion_node(sensor_mounts=["imu_link=1,2"])
