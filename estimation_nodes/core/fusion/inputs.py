@@ -51,8 +51,9 @@ IDENTITY = Mount()
 
 def _masked(rotation: FloatArray, mask: tuple[bool, ...]) -> list[bool]:
     """Which axes a rotated mask still touches (the peer's row-length test)."""
-    rotated = rotation @ np.diag(np.asarray(mask, dtype=float))
-    return [bool(np.linalg.norm(row) >= 1e-6) for row in rotated]
+    # Row i of R diag(mask) has the length sqrt(sum_j R_ij^2 mask_j).
+    lengths = np.sqrt((rotation * rotation) @ np.asarray(mask, dtype=float))
+    return [bool(length >= 1e-6) for length in lengths]
 
 
 def _measurement(stamp_ns: int, z: FloatArray, covariance: FloatArray, mask: list[bool],
@@ -61,6 +62,12 @@ def _measurement(stamp_ns: int, z: FloatArray, covariance: FloatArray, mask: lis
     if not indices:
         return None
     return Measurement(stamp_ns, z, covariance, indices, threshold, source)
+
+
+def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """a x b for 3-vectors (numpy's cross costs more than the rest of a reading)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
+                     a[0] * b[1] - a[1] * b[0]])
 
 
 def _block_rotation(rotation: FloatArray) -> FloatArray:
@@ -75,7 +82,7 @@ def twist(stamp_ns: int, linear: FloatArray, angular: FloatArray, covariance6: F
     """A twist (linear and angular velocity in the sensor's frame) as a measurement."""
     r = mount.rotation
     z = np.zeros(STATE_SIZE)
-    z[VX:VX + 3] = r @ linear + np.cross(mount.origin, state_rates)
+    z[VX:VX + 3] = r @ linear + _cross(mount.origin, state_rates)
     z[VROLL:VROLL + 3] = r @ angular
     covariance = np.zeros((STATE_SIZE, STATE_SIZE))
     rot6 = _block_rotation(r)
@@ -122,8 +129,8 @@ def acceleration(stamp_ns: int, linear: FloatArray, covariance3: FloatArray,
     r, o = mount.rotation, mount.origin
     if remove_gravity and attitude is not None:
         linear = linear - attitude.T @ np.array([0.0, 0.0, gravity])
-    a = r @ linear + np.cross(o, angular_acceleration) \
-        - np.cross(np.cross(o, state_rates), state_rates)
+    a = r @ linear + _cross(o, angular_acceleration) \
+        - _cross(_cross(o, state_rates), state_rates)
     z = np.zeros(STATE_SIZE)
     z[ACCELERATION] = a
     covariance = np.zeros((STATE_SIZE, STATE_SIZE))

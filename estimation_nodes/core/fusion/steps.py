@@ -92,13 +92,13 @@ def ekf_correct(x: FloatArray, p: FloatArray, measurement: Measurement
     """K = P H' (H P H' + R)^-1, x' = x + K y, P' = (I - K H) P (I - K H)' + K R K'."""
     idx = list(measurement.indices)
     z, r = subset(measurement)
-    h = np.eye(STATE_SIZE)[idx]
-    pht = p @ h.T
-    s_inverse = np.linalg.inv(h @ pht + r)
+    pht = p[:, idx]                       # P H' with H the rows idx of the identity
+    s_inverse = np.linalg.inv(pht[idx] + r)
     k = pht @ s_inverse
     innovation = _wrap_angle_entries(z - x[idx], measurement.indices)
     _check(innovation, s_inverse, measurement.threshold)
-    gain_residual = np.eye(STATE_SIZE) - k @ h
+    gain_residual = np.eye(STATE_SIZE)
+    gain_residual[:, idx] -= k
     p_new = gain_residual @ p @ gain_residual.T + k @ r @ k.T
     return wrap_state_angles(x + k @ innovation), p_new
 
