@@ -5,7 +5,7 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
-SOURCES := $(shell find estimation_nodes msgs_config foxglove maps scripts resource -type f \
+SOURCES := $(shell find estimation_nodes msgs_config foxglove maps scripts resource interfaces -type f \
 	-not -name '*.pyc') \
 	pyproject.toml package.xml setup.py setup.cfg
 
