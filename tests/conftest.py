@@ -142,6 +142,27 @@ def collector_factory(context, executor):
 
 
 @pytest.fixture
+def make_node(context, executor):
+    """``make_node(name, **parameters)``: a bare node spun by the test's executor, destroyed
+    after the test."""
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    made = []
+
+    def make(name: str, **parameters):
+        node = Node(name, context=context, parameter_overrides=[
+            Parameter(k, value=v) for k, v in parameters.items()])
+        executor.add_node(node)
+        made.append(node)
+        return node
+
+    yield make
+    for node in made:
+        node.destroy_node()
+
+
+@pytest.fixture
 def processes(ros_env):
     """Start children with the test's ROS environment; each is ended by its pid afterwards."""
     started: list[subprocess.Popen] = []
