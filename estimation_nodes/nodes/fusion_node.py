@@ -9,9 +9,14 @@ it. The inputs ``odomN`` (nav_msgs/Odometry), ``twistN``
 they come; a timer at ``frequency`` on the node's clock (``/clock`` with
 ``use_sim_time``) runs the periodic update and publishes ``odometry/filtered``. A sensor
 frame other than ``base_link_frame`` needs its mount: ``sensor_mounts`` (this package's
-parameter, ["FRAME=x,y,z,roll,pitch,yaw", ...]) gives it until the tf listener lands.
-A message with a non-finite value in what it feeds is dropped and counted, so nothing
-NaN is ever published.
+parameter, ["FRAME=x,y,z,roll,pitch,yaw", ...]) gives it, else the transform tree
+(``/tf_static``, ``/tf``: nodes/tf.py) at the message's time. With ``publish_tf`` the
+estimate goes on ``/tf`` too: ``odom -> base_link`` when ``world_frame`` is the odom
+frame, ``map -> odom`` (through the tree's ``odom -> base_link`` at the estimate's time)
+when it is the map frame, stamped with the estimate's time plus
+``transform_time_offset``. A clock that jumps back (a bag played again) resets the
+filter, as the peer does. A message with a non-finite value in what it feeds is dropped
+and counted, so nothing NaN is ever published.
 """
 
 from __future__ import annotations
@@ -29,9 +34,12 @@ from sensor_msgs.msg import Imu
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.sensors import SensorInputs
-from estimation_nodes.core.fusion.state import quaternion_from_rpy
+from estimation_nodes.core.fusion.state import quaternion_from_rpy, rotation_from_quaternion
+from estimation_nodes.core.transforms.buffer import LookupFailed, TransformBuffer
+from estimation_nodes.core.transforms.rigid import Transform
 from estimation_nodes.nodes.parameters import ConfigurationError
 from estimation_nodes.nodes.process import main_for
+from estimation_nodes.nodes.tf import TransformBroadcaster, TransformListener, to_message
 from estimation_nodes.params.fusion import FusionConfigError, fusion_config
 
 MESSAGE_TYPES = {"odom": Odometry, "twist": TwistWithCovarianceStamped, "imu": Imu}
@@ -70,12 +78,20 @@ class FusionNode(Node):
         for name in self._config.unsupported:
             self.get_logger().warning(f"parameter {name} is not supported yet: ignored")
         self._fusion = FusionFilter(self._config.settings)
-        self._inputs = SensorInputs(dict(self._config.sensors), mounts,
+        self._given_mounts = mounts
+        self._inputs = SensorInputs(dict(self._config.sensors), dict(mounts),
                                     self._config.base_link_frame, self._config.gravity)
         self.dropped_non_finite = 0
+        self.resets = 0
         self._last_published_ns = -1
         self._publisher = self.create_publisher(Odometry, "odometry/filtered", 10)
-        self._subscriptions = [self._subscribe(sensor) for sensor in self._config.sensors.values()]
+        self.tf_buffer = TransformBuffer()
+        self._tf_listener = TransformListener(self, self.tf_buffer,
+                                              on_jump_back=self._on_time_jump_back)
+        self._tf_broadcaster = TransformBroadcaster(self) if self._config.publish_tf else None
+        # Not self._subscriptions: that is rclpy's own list of the node's subscriptions.
+        self._sensor_subscriptions = [self._subscribe(sensor)
+                                      for sensor in self._config.sensors.values()]
         self._timer = self.create_timer(1.0 / self._config.frequency, self._on_timer)
 
     def _subscribe(self, sensor):
@@ -89,10 +105,40 @@ class FusionNode(Node):
                     f"{sensor.name} ({sensor.topic}): a non-finite value: message dropped",
                     throttle_duration_sec=5.0)
                 return
+            self._mount_from_tf(msg.child_frame_id if sensor.kind == "odom"
+                                else msg.header.frame_id, msg.header.stamp)
             self._inputs.add(sensor, msg, self._fusion)
 
         return self.create_subscription(MESSAGE_TYPES[sensor.kind], sensor.topic,
                                         on_message, qos)
+
+    def _mount_from_tf(self, frame: str, stamp) -> None:
+        """The sensor frame's mount from the tree, unless ``sensor_mounts`` gives it; left
+        unknown (the message is then dropped and counted) when the tree cannot say."""
+        if frame in ("", self._config.base_link_frame) or frame in self._given_mounts:
+            return
+        time_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        try:
+            try:
+                t = self.tf_buffer.lookup(self._config.base_link_frame, frame, time_ns)
+            except LookupFailed:
+                t = self.tf_buffer.lookup(self._config.base_link_frame, frame)
+        except LookupFailed as error:
+            self._inputs.mounts.pop(frame, None)
+            self.get_logger().warning(f"no mount for {frame!r}: {error}",
+                                      throttle_duration_sec=5.0)
+            return
+        self._inputs.mounts[frame] = Mount(rotation_from_quaternion(*t.rotation),
+                                           np.asarray(t.translation, dtype=float))
+
+    def _on_time_jump_back(self) -> None:
+        """A clock that went back (a bag played again): start over, as the peer does."""
+        self._fusion.reset()
+        self._inputs = SensorInputs(dict(self._config.sensors), dict(self._given_mounts),
+                                    self._config.base_link_frame, self._config.gravity)
+        self._last_published_ns = -1
+        self.resets += 1
+        self.get_logger().warning("time jumped back: the filter was reset")
 
     def _on_timer(self) -> None:
         now_ns = self.get_clock().now().nanoseconds
@@ -105,7 +151,31 @@ class FusionNode(Node):
             self._fusion.reset()
             return
         self._last_published_ns = self._fusion.last_time_ns
-        self._publisher.publish(self._odometry())
+        odometry = self._odometry()
+        self._publisher.publish(odometry)
+        if self._tf_broadcaster is not None:
+            self._broadcast(odometry)
+
+    def _broadcast(self, odometry: Odometry) -> None:
+        """The estimate on /tf: world -> base_link, or map -> odom when the world is the
+        map (the odometry's own odom -> base_link taken out, at the estimate's time)."""
+        p, q = odometry.pose.pose.position, odometry.pose.pose.orientation
+        world_base = Transform((p.x, p.y, p.z), (q.x, q.y, q.z, q.w))
+        stamp = self._fusion.last_time_ns + self._config.transform_time_offset_ns
+        config = self._config
+        if config.world_frame != config.map_frame or config.world_frame == config.odom_frame:
+            self._tf_broadcaster.send([to_message(config.world_frame, config.base_link_frame,
+                                                  stamp, world_base)])
+            return
+        try:
+            odom_base = self.tf_buffer.lookup(config.odom_frame, config.base_link_frame,
+                                              self._fusion.last_time_ns)
+        except LookupFailed as error:
+            self.get_logger().warning(f"map -> odom not published: {error}",
+                                      throttle_duration_sec=5.0)
+            return
+        self._tf_broadcaster.send([to_message(config.map_frame, config.odom_frame, stamp,
+                                              world_base * odom_base.inverse())])
 
     def _odometry(self) -> Odometry:
         x, p = self._fusion.x, self._fusion.p

@@ -52,6 +52,9 @@ class FusionConfig:
     odom_frame: str = "odom"
     map_frame: str = "map"
     publish_tf: bool = True
+    #: Added to the filter's time in the stamp of the transform it publishes (the peer's
+    #: ``transform_time_offset``, s).
+    transform_time_offset_ns: int = 0
     gravity: float = 9.80665
     unsupported: tuple[str, ...] = field(default_factory=tuple)
 
@@ -152,8 +155,16 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
         odom_frame=str(params.get("odom_frame", "odom")),
         map_frame=str(params.get("map_frame", "map")),
         publish_tf=bool(params.get("publish_tf", True)),
+        transform_time_offset_ns=_offset_ns(params),
         gravity=float(params.get("gravitational_acceleration", 9.80665)),
         unsupported=tuple(unsupported))
+
+
+def _offset_ns(params: dict[str, Any]) -> int:
+    offset = float(params.get("transform_time_offset", 0.0))
+    if not (math.isfinite(offset) and offset >= 0):
+        raise FusionConfigError("transform_time_offset: expected a non-negative time in s")
+    return round(offset * 1e9)
 
 
 def parameters_of_file(path: str, node_name: str | None = None) -> dict[str, Any]:

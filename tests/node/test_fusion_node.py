@@ -78,7 +78,7 @@ def test_odometry_in_gives_a_moving_finite_estimate_out(fusion_node, collector_f
 def test_a_nan_reading_is_dropped_and_counted(fusion_node, context, executor):
     node = fusion_node()
     bad = odom(1_000_000_000, float("nan"), 0.0)
-    node._subscriptions[0].callback(bad)
+    node._sensor_subscriptions[0].callback(bad)
     assert node.dropped_non_finite == 1
     assert node._fusion.queued == 0
 
@@ -88,3 +88,23 @@ def test_a_bad_parameter_stops_the_node_with_its_name(fusion_node):
         fusion_node(odom0_config=[True, False])
     with pytest.raises(ConfigurationError, match="sensor_mounts"):
         fusion_node(sensor_mounts=["imu_link=1,2"])
+
+
+def test_a_clock_that_jumps_back_resets_the_filter(fusion_node, make_node, executor):
+    """A bag played again (--loop): the peer resets on a jump back in time; so does ours."""
+    from rosgraph_msgs.msg import Clock
+
+    node = fusion_node(use_sim_time=True)
+    clock = make_node("clock_source").create_publisher(Clock, "/clock", 10)
+
+    def at(seconds: int) -> bool:
+        msg = Clock()
+        msg.clock.sec = seconds
+        clock.publish(msg)
+        return node.get_clock().now().nanoseconds == seconds * 1_000_000_000
+
+    assert spin_until(executor, lambda: at(100), 10.0)
+    node._sensor_subscriptions[0].callback(odom(100_000_000_000, 1.0, 0.0))
+    assert spin_until(executor, lambda: at(101) and node._fusion.initialized, 10.0)
+    assert spin_until(executor, lambda: at(5) and node.resets == 1, 10.0)
+    assert not node._fusion.initialized

@@ -22,6 +22,7 @@ from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.sensors import SensorInputs
 from estimation_nodes.params.fusion import FusionConfig, FusionConfigError, fusion_config, \
     parameters_of_file
+from estimation_nodes.tools.recording import bags
 
 
 @dataclass
@@ -35,13 +36,10 @@ class FusionRun:
 
 
 def bag_messages(path: Path, topics: set[str]):
-    """(receive time ns, topic, message) in recorded order, from any bag ``rosbags`` reads."""
-    from rosbags.highlevel import AnyReader
-
-    with AnyReader([path]) as reader:
-        connections = [c for c in reader.connections if c.topic in topics]
-        for connection, timestamp, raw in reader.messages(connections=connections):
-            yield timestamp, connection.topic, reader.deserialize(raw, connection.msgtype)
+    """(receive time ns, topic, message) in recorded order, from any bag ``rosbags`` reads
+    (the one bag reader: tools/recording/bags.py)."""
+    for timestamp, topic, _, msg in bags.bag_messages(path, topics):
+        yield timestamp, topic, msg
 
 
 def run(config: FusionConfig, messages, mounts: dict[str, Mount] | None = None) -> FusionRun:
