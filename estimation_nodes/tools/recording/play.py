@@ -1,7 +1,12 @@
 """estimation_play: a recording's messages published again, with their recorded timing.
 
-    estimation_play run.mcap [--rate R] [--topics /scan /odom ...] [--clock]
+    estimation_play RECORDING [--rate R] [--topics /scan /odom ...] [--clock]
                     [--wait-for-subscribers SECONDS] [--delay SECONDS]
+
+RECORDING is one of the package's MCAP recordings, a robot's ROS 1 bag (``.bag``) or a
+rosbag2 folder (MCAP or sqlite3): bags are read with the ``rosbags`` library and their
+messages published as this ROS 2's types (tools/recording/bags.py), ``/tf`` and
+``/tf_static`` included (``/tf_static`` latched, as its publishers do).
 
 Each message goes out at its recorded time (the log time, scaled by 1/R), as its
 recorded CDR bytes, with the QoS its driver would use: a laser scan best effort
@@ -50,8 +55,12 @@ class Recorded:
 
 
 def read_raw(path: Path, only: set[str] | None = None) -> list[Recorded]:
-    """Every message of an MCAP file (or of the topics ``only``), as bytes, in log-time
-    order."""
+    """Every message of a recording or bag (or of the topics ``only``), as CDR bytes, in
+    log-time order."""
+    from estimation_nodes.tools.recording.bags import is_bag
+
+    if is_bag(path):
+        return _read_bag(path, only)
     try:
         from mcap.exceptions import McapError
         from mcap.reader import make_reader
@@ -71,13 +80,28 @@ def read_raw(path: Path, only: set[str] | None = None) -> list[Recorded]:
     return found
 
 
-def qos_for(type_name: str):
+def _read_bag(path: Path, only: set[str] | None) -> list[Recorded]:
+    from rclpy.serialization import serialize_message
+
+    from estimation_nodes.tools.recording.bags import bag_messages
+
+    if not path.exists():
+        raise RecordingError(f"{path}: no such bag")
+    return [Recorded(stamp, topic, type_name, serialize_message(msg))
+            for stamp, topic, type_name, msg in bag_messages(path, only)]
+
+
+def qos_for(type_name: str, topic: str = ""):
     from rclpy.qos import qos_profile_sensor_data
 
     from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 
     if type_name in BEST_EFFORT_TYPES:
         return qos_profile_sensor_data
+    if topic == "/tf_static":
+        from estimation_nodes.nodes.tf import TF_STATIC_PUBLISHER_QOS
+
+        return TF_STATIC_PUBLISHER_QOS
     if type_name in LATCHED_TYPES:
         return latched_qos(1)
     return INPUT_QOS
@@ -95,7 +119,8 @@ class Player:
         for message in messages:
             if message.topic not in self._publishers:
                 self._publishers[message.topic] = node.create_publisher(
-                    message_class(message.type_name), message.topic, qos_for(message.type_name))
+                    message_class(message.type_name), message.topic,
+                    qos_for(message.type_name, message.topic))
         self._clock = None
         if clock:
             from rosgraph_msgs.msg import Clock
