@@ -10,15 +10,29 @@ ones again, in order (robot_localization's ``smooth_lagged_data`` idea). An
 event in order costs one state snapshot (references, no copy) and one list
 append; nothing waits for a reorder window.
 
+A rejected event is kept in its place too. Whether a reading is possible can
+depend on the state before it (with a zero in the sensor model, a reading can
+have no evidence on a belief that a move still on its way would have shifted),
+and that state is provisional until every earlier event has come. So whenever a late event
+changes the state before a rejected one, the replay tries it again: taken now,
+it changes the state like any other; rejected again, it stays kept. With
+nothing forgotten, the state is that of the events applied in causal order
+from the start, each taken or rejected on the state before it: what the filter
+run offline over the sorted events gives. This needs ``apply`` to be a function
+of the state and the event (the same answer on the same state): a late event
+that is rejected leaves the state before every later one as it was, so nothing
+after it runs again.
+
 The order key is (stamp, rank, arrival): ``stamp`` is when the event happened
 (a source timestamp, in ns), ``rank`` breaks ties between kinds of event (a
 move before the reading taken at the same instant), and arrival keeps equal
 keys stable.
 
 The history is bounded by ``horizon_ns`` (events older than the newest by
-more are forgotten) and ``max_events``. An event older than everything the
-history still holds cannot be put in its place: it is applied at once, as
-the newest, and reported as such (``Submission.too_late``).
+more are forgotten) and ``max_events``, rejected events included. An event
+older than everything the history still holds cannot be put in its place: it
+is applied at once, as the newest, and reported as such
+(``Submission.too_late``).
 """
 
 from __future__ import annotations
@@ -44,7 +58,9 @@ class Replayable(Protocol[State]):
     def apply(self, event: Any, first_time: bool) -> bool:
         """Apply ``event``; False when it was rejected and changed nothing.
 
-        ``first_time`` is False when the event is applied again after a late one.
+        ``first_time`` is True once per event, when it arrives, and False whenever it
+        runs again after a late one: applied again, or tried again after a rejection
+        (count an event, or warn of it, only the first time).
         """
         ...
 
@@ -53,14 +69,19 @@ class Replayable(Protocol[State]):
 class Submission:
     """What one ``submit`` did."""
 
-    #: The event changed the state (False: rejected, nothing kept).
+    #: The event changed the state (False: rejected; kept in its place, to be tried again
+    #: if a late event changes the state before it).
     applied: bool
-    #: It happened before events already applied, and was put in its place.
+    #: It happened before events already applied, was applied in its place and the later
+    #: ones run again (False for a rejected one: it changed nothing, so nothing ran again).
     reordered: bool = False
-    #: Events applied again after it (0 when it arrived in order).
+    #: Events after it applied before and applied again (0 when it arrived in order).
     reapplied: int = 0
-    #: Events that were applied before but were rejected when applied again.
+    #: Events after it that were applied before but were rejected when applied again
+    #: (kept, to be tried again).
     dropped_on_reapply: int = 0
+    #: Events after it that were rejected before and were taken when tried again.
+    taken_on_retry: int = 0
     #: It happened before everything the history holds: applied at once, out of order.
     too_late: bool = False
 
@@ -74,6 +95,8 @@ class _Entry(Generic[State]):
     key: tuple[int, int, int]
     event: Any
     before: State
+    #: Whether the event changed the state from ``before`` (False: rejected there).
+    taken: bool
 
 
 def _key_of(entry: _Entry) -> tuple[int, int, int]:
@@ -119,37 +142,45 @@ class CausalOrder(Generic[State]):
         return self._insert(key, event)
 
     def _apply_new(self, key: tuple[int, int, int], event: Any) -> bool:
+        """Apply ``event`` after every event held, and keep it, taken or not."""
         before = self._target.snapshot()
-        if not self._target.apply(event, True):
-            return False
-        self._entries.append(_Entry(key, event, before))
+        taken = self._target.apply(event, True)
+        self._entries.append(_Entry(key, event, before, taken))
         self._forget_old()
-        return True
+        return taken
 
     def _insert(self, key: tuple[int, int, int], event: Any) -> Submission:
-        """Go back to the state before the first later event, apply ``event``, then the
-        later ones again."""
+        """Go back to the state before the first later event, apply ``event``, then run the
+        later ones again (those rejected before are tried again)."""
         entries = self._entries
         index = bisect_right(entries, key, key=_key_of)
+        latest = self._target.snapshot()
+        before = entries[index].before
+        self._target.restore(before)
+        if not self._target.apply(event, True):
+            # Rejected: the state before each later event is as it was, and so is what
+            # each did there; nothing runs again.
+            self._target.restore(latest)
+            entries.insert(index, _Entry(key, event, before, False))
+            self._forget_old()
+            return _REJECTED
         later = entries[index:]
         del entries[index:]
-        latest = self._target.snapshot()
-        self._target.restore(later[0].before)
-        if not self._apply_new(key, event):
-            # Rejected: it changes nothing, so the later events need not run again.
-            self._target.restore(latest)
-            entries.extend(later)
-            return Submission(applied=False)
-        dropped = 0
+        entries.append(_Entry(key, event, before, True))
+        reapplied = dropped = retaken = 0
         for entry in later:
             before = self._target.snapshot()
-            if self._target.apply(entry.event, False):
-                entries.append(_Entry(entry.key, entry.event, before))
-            else:
+            taken = self._target.apply(entry.event, False)
+            entries.append(_Entry(entry.key, entry.event, before, taken))
+            if entry.taken and taken:
+                reapplied += 1
+            elif entry.taken:
                 dropped += 1
+            elif taken:
+                retaken += 1
         self._forget_old()
-        return Submission(applied=True, reordered=True, reapplied=len(later) - dropped,
-                          dropped_on_reapply=dropped)
+        return Submission(applied=True, reordered=True, reapplied=reapplied,
+                          dropped_on_reapply=dropped, taken_on_retry=retaken)
 
     def _forget_old(self) -> None:
         entries = self._entries

@@ -7,7 +7,10 @@ order DDS delivered them (core/causal_order.py): a reading that arrives before
 the move that caused it is applied at once, and when the move comes the
 filters go back, apply it, apply the reading again and republish. A bad
 message, or one whose result would not be finite, is dropped with a
-throttled warning and counted; the filters are left untouched.
+throttled warning and counted; the filters are left untouched. A rejected
+event still keeps its place in the reorder history: a reading of zero evidence
+that came before its move is tried again when the move comes (counted once, in
+``rejected``; in ``events.taken_on_retry`` when taken then).
 
 A parameter change that is right on its own but does not fit the others yet
 (three classes with a 2 x 2 sensor model, a 20-cell world with a 5-cell prior)
@@ -293,6 +296,9 @@ class Estimator(Node):
             self.reordering["reapplied"] += submission.reapplied
         if submission.dropped_on_reapply:
             self.reordering["dropped_on_reapply"] += submission.dropped_on_reapply
+        # Counted in rejected.* when they arrived, and not again: taken now, they show here.
+        if submission.taken_on_retry:
+            self.reordering["taken_on_retry"] += submission.taken_on_retry
         if submission.too_late:
             self.reordering["too_late"] += 1
             self._warn("too_late", "an event older than the reorder history arrived: applied "

@@ -11,6 +11,8 @@ import pytest
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64, Int32, String
 
+from estimation_nodes.core.tiles import histogram
+from estimation_nodes.core.tiles.models import HistogramModel
 from estimation_nodes.nodes.estimator import Estimator
 from estimation_nodes.tools.replay.estimator import align
 from tests.conftest import spin_until
@@ -131,3 +133,30 @@ def test_a_rejected_late_event_leaves_the_estimate_and_counts_once(context, exec
     np.testing.assert_array_equal(estimator._histogram.belief, before)
     assert estimator.rejected["unknown_class"] == 1
     assert estimator.reordering["reordered"] == 0
+
+
+def test_a_reading_of_zero_evidence_before_its_move_is_taken_when_the_move_comes(
+        context, executor, collector_factory):
+    """One bright cell of eight, a sensor that never reads dark as bright: the second bright
+    reading arrives before the move that brought the robot back to the bright cell."""
+    world = ["bright"] + ["dark"] * 7
+    classes, sensor_model = ["bright", "dark"], [0.8, 0.2, 0.0, 1.0]
+    estimator, out = make_estimator(context, executor, collector_factory, history_depth=100,
+                                    world=world, classes=classes, sensor_model=sensor_model)
+    deliver(estimator, [(1 * SECOND, "tile_observation", String(data="bright")),
+                        (2 * SECOND, "motion_cmd", Int32(data=2)),
+                        (4 * SECOND, "tile_observation", String(data="bright"))])
+    assert estimator.rejected["zero_evidence"] == 1
+    deliver(estimator, [(3 * SECOND, "motion_cmd", Int32(data=6))])
+    model = HistogramModel.from_lists(world, classes, sensor_model, [0.1, 0.8, 0.1])
+    belief = histogram.uniform(model.size)
+    belief, _ = histogram.correct(belief, model.likelihood("bright"))
+    belief = histogram.predict(histogram.predict(belief, 2, model.kernel), 6, model.kernel)
+    belief, _ = histogram.correct(belief, model.likelihood("bright"))
+    np.testing.assert_allclose(estimator._histogram.belief, belief, rtol=0, atol=1e-12)
+    # Published, and counted once: rejected when it came, taken on its retry.
+    assert spin_until(executor, lambda: len(out.messages["belief"]) == 2, 5.0)
+    np.testing.assert_allclose(beliefs(out, "belief")[-1], belief, rtol=0, atol=1e-12)
+    assert estimator.rejected["zero_evidence"] == 1
+    assert estimator.reordering["taken_on_retry"] == 1
+    assert estimator.handled["tile_observation"] == 1
