@@ -53,7 +53,8 @@ def main() -> None:
 
     localizer = subprocess.Popen(
         [sys.executable, "-m", "estimation_nodes.nodes.grid_localizer", "--ros-args", "-p",
-         f"map_file:={MAP}", "-p", "diagnostics_period:=0.2", "--log-level", "warn"],
+         f"map_file:={MAP}", "-p", "diagnostics_period:=0.2", "-p", "autostart:=true",
+         "-p", "odometry_source:=topic", "--log-level", "warn"],
         env=env, cwd=BENCH.parent)
     rclpy.init()
     node = Node("grid_bench_driver")

@@ -69,7 +69,8 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
     every += ["-p", "scan_fit:=false"] if args.no_scan_fit else []
     localizer = subprocess.Popen(
         [executable("grid_localizer"), "--ros-args", *grid, "-p", "max_states:=200000000",
-         "-p", "diagnostics_period:=0.5", *every],
+         "-p", "diagnostics_period:=0.5", "-p", "autostart:=true",
+         "-p", "odometry_source:=topic", *every],
         env=env, stdout=(work / "localizer.log").open("w"), stderr=subprocess.STDOUT)
     rclpy.init()
     watcher = Watcher()

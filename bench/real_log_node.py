@@ -223,7 +223,8 @@ def localizer_parameters(args: argparse.Namespace, map_yaml: Path) -> str:
         "map_file": str(map_yaml), "resolution": args.resolution,
         "heading_bins": args.heading_bins, "max_states": 200_000_000,
         "laser_max_range": RANGE_MAX, "diagnostics_period": 0.5,
-        "max_odom_jump": args.max_odom_jump}}})
+        "max_odom_jump": args.max_odom_jump, "autostart": True,
+        "odometry_source": "topic"}}})
 
 
 def draw(log, watcher: Watcher, map_yaml: Path, output: Path, name: str) -> None:

@@ -143,16 +143,17 @@ def collector_factory(context, executor):
 
 @pytest.fixture
 def make_node(context, executor):
-    """``make_node(name, **parameters)``: a bare node spun by the test's executor, destroyed
-    after the test."""
+    """``make_node(name or node class, **parameters)``: a bare node of that name, or one of
+    the package's nodes, spun by the test's executor and destroyed after the test."""
     from rclpy.node import Node
     from rclpy.parameter import Parameter
 
     made = []
 
-    def make(name: str, **parameters):
-        node = Node(name, context=context, parameter_overrides=[
-            Parameter(k, value=v) for k, v in parameters.items()])
+    def make(kind, **parameters):
+        overrides = [Parameter(k, value=v) for k, v in parameters.items()]
+        node = Node(kind, context=context, parameter_overrides=overrides) \
+            if isinstance(kind, str) else kind(context=context, parameter_overrides=overrides)
         executor.add_node(node)
         made.append(node)
         return node

@@ -1,4 +1,13 @@
-"""grid_localizer: grid Markov localization on a map, with OccupancyGrid, LaserScan and Odometry.
+"""grid_localizer: grid Markov localization on a map, with OccupancyGrid, LaserScan and odometry;
+a drop-in for nav2_amcl (docs/nodes/grid_localizer.md compares the two).
+
+A lifecycle node, as AMCL: Nav2's lifecycle manager configures and activates it (or
+``autostart``); nothing is taken or published unless it is active. Odometry comes from
+the tf tree as AMCL takes it (``odom_frame_id`` -> ``base_frame_id`` at each scan's time,
+and the laser's mount from ``base_frame_id`` to the scan's frame), or from the ``odom``
+topic (``odometry_source: topic``, the package's simulator). After each scan it publishes
+``global_frame_id`` -> ``odom_frame_id`` on /tf, stamped with the scan's time plus
+``transform_tolerance``, so that the tree's map -> base_link is the published pose.
 
 The belief over (x, y, heading) starts uniform over the free cells: the
 robot need not be told where it is. ``odom`` is followed continuously; a
@@ -10,10 +19,10 @@ state grid: RViz's Map display and Foxglove's 3D panel draw it) and
 ``localization_quality`` (the belief's probability near that pose), the
 quality first. Bad messages are dropped and counted, never a NaN belief.
 
-A scan waits up to ``odom_wait`` for the odometry of its time and is dropped
-if it does not come; scans that come while others wait queue behind them (up to
-WAITING_SCANS, the oldest superseded beyond) and are taken in order as their
-odometry comes.
+A scan waits up to ``odom_wait`` (``transform_tolerance`` with odometry from tf) for the
+odometry of its time and is dropped if it does not come; scans that come while others
+wait queue behind them (up to WAITING_SCANS, the oldest superseded beyond) and are taken
+in order as their odometry comes.
 Each published pose carries the stamp of what made it: its scan's time, the
 initial pose's, or the time of a start or reset (uniform belief). So a
 replay of a recorded run (tools/replay/grid_localizer.py) takes exactly the
@@ -34,21 +43,27 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseWithCovarianceStamped
+from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from rclpy.service import Service
+from rclpy.timer import Timer
 from rclpy.time import Time
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Float64
-from std_srvs.srv import Trigger
+from std_srvs.srv import Empty, Trigger
 
 from estimation_nodes.core import errors
 from estimation_nodes.core.grid import steps as grid
 from estimation_nodes.core.grid.localization import (ODOMETRY_HISTORY, GridLocalization,
                                                      OdometryStep)
+from estimation_nodes.core.transforms.buffer import (Extrapolation, LookupFailed,
+                                                     TransformBuffer)
+from estimation_nodes.core.transforms.rigid import Transform
 from estimation_nodes.nodes.diagnostics import status_array
 from estimation_nodes.nodes.grid_messages import (
     covariance_3x3,
+    fill_pose,
     finite_pose,
     occupancy_grid,
     occupancy_of,
@@ -61,9 +76,10 @@ from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import NEWEST_SCAN_QOS, latched_qos
 from estimation_nodes.nodes.scan_gaps import ScanGaps
 from estimation_nodes.nodes.stamps import stamp_or_none
+from estimation_nodes.nodes.tf import TransformBroadcaster, TransformListener, to_message
 from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
-from estimation_nodes.params.grid import build_grid_localizer_settings
+from estimation_nodes.params.grid import AMCL_INITIAL_COVARIANCE, build_grid_localizer_settings
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS
 
 #: How often a waiting scan is checked against its ``odom_wait`` (s). A scan that waited
@@ -85,9 +101,11 @@ UPDATE_TIMES_KEPT = 1000
 #: during an update waits, and one after it replaces it (WARN in /diagnostics). Counted
 #: directly where the scans carry their period (scan_time): scans_missed.
 BUSY_WARNING = 0.9
+#: States shown in particle_cloud (RViz's PoseArray): the most probable ones.
+PARTICLE_CLOUD_STATES = 500
 
 
-class GridLocalizer(Node):
+class GridLocalizer(LifecycleNode):
     """Where the robot is on the map, as an exact grid belief."""
 
     node_name = "grid_localizer"
@@ -96,6 +114,7 @@ class GridLocalizer(Node):
         super().__init__(self.node_name, **kwargs)
         _, self._settings = declare_and_build(
             self, GRID_LOCALIZER_SPECS, build_grid_localizer_settings)
+        self._frames = self._settings.frames
         self.handled: Counter[str] = Counter()
         self.rejected: Counter[str] = Counter()
         self._warnings = ThrottledWarnings(self.get_logger())
@@ -103,33 +122,125 @@ class GridLocalizer(Node):
         self.last_update_s = float("nan")
         #: The durations (s) of the latest updates, for /diagnostics' median and maximum.
         self.update_times: deque[float] = deque(maxlen=UPDATE_TIMES_KEPT)
+        self.active = False
+        self.tf_buffer = TransformBuffer()
+        #: map -> odom as of the last update (None before the first), sent again after each
+        #: scan with its stamp, as AMCL does between updates.
+        self._map_odom: Transform | None = None
+        self._laser_mounts: dict[str, tuple[float, float, float]] = {}
+        self._pending_initial_pose: PoseWithCovarianceStamped | None = None
+        self._force_update = False
+        self._made: list[Any] = []
+        self._configured = False
+        if self.get_parameter("autostart").value:
+            self.trigger_configure()
+            self.trigger_activate()
+
+    # --- lifecycle ---------------------------------------------------------------------------
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         latched = latched_qos(self._settings.history_depth)
-        self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, topics.POSE, latched)
-        self._belief_pub = self.create_publisher(OccupancyGrid, topics.BELIEF_MAP, latched)
-        self._quality_pub = self.create_publisher(Float64, topics.LOCALIZATION_QUALITY, latched)
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, "/diagnostics", 10)
+        self._pose_pub = self.create_lifecycle_publisher(PoseWithCovarianceStamped,
+                                                         topics.POSE, latched)
+        self._belief_pub = self.create_lifecycle_publisher(OccupancyGrid, topics.BELIEF_MAP,
+                                                           latched)
+        self._quality_pub = self.create_lifecycle_publisher(Float64,
+                                                            topics.LOCALIZATION_QUALITY, latched)
+        self._cloud_pub = self.create_lifecycle_publisher(PoseArray, topics.PARTICLE_CLOUD,
+                                                          latched_qos(1))
+        self._diagnostics_pub = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics",
+                                                                10)
         self._pose_msg = PoseWithCovarianceStamped()
-        if self._settings.model is not None:
-            self._start(self._settings.model)
-        else:
-            self.create_subscription(OccupancyGrid, topics.MAP, self._on_map, latched_qos(1))
+        self._tf_listener = TransformListener(self, self.tf_buffer,
+                                              on_jump_back=self._on_time_jump_back,
+                                              on_transforms=self._use_waiting_scans) \
+            if self._frames.odometry_from_tf else None
+        self._tf_broadcaster = TransformBroadcaster(self) if self._frames.tf_broadcast else None
+        subscribe, made = self.create_subscription, self._made
+        if self._settings.model is None:
+            made.append(subscribe(OccupancyGrid, topics.MAP, self._on_map, latched_qos(1)))
         # A scan is only worth its latest, while odometry is followed in order.
-        self.create_subscription(LaserScan, topics.SCAN, self._on_scan, NEWEST_SCAN_QOS)
+        made.append(subscribe(LaserScan, topics.SCAN, self._on_scan, NEWEST_SCAN_QOS))
         self.scan_gaps = ScanGaps()
         self._missed_reported = 0
         #: Time spent updating since the last /diagnostics, and when that was (monotonic s).
         self._busy_s = 0.0
         self._reported_at = time.monotonic()
-        self.create_subscription(Odometry, topics.ODOM, self._on_odom, ODOM_DEPTH)
-        self.create_subscription(PoseWithCovarianceStamped, topics.INITIAL_POSE,
-                                 self._on_initial_pose, 10)
-        self.create_service(Trigger, "~/global_localization", self._on_global_localization)
-        self.create_service(Trigger, "~/reset", self._on_reset)
-        self.create_timer(self._settings.diagnostics_period, self._publish_diagnostics)
+        if not self._frames.odometry_from_tf:
+            made.append(subscribe(Odometry, topics.ODOM, self._on_odom, ODOM_DEPTH))
+        made.append(subscribe(PoseWithCovarianceStamped, topics.INITIAL_POSE,
+                              self._on_initial_pose, 10))
+        made.append(self.create_service(Trigger, "~/global_localization",
+                                        self._on_global_localization))
+        made.append(self.create_service(Trigger, "~/reset", self._on_reset))
+        # nav2_amcl's own services, by its names and types.
+        made.append(self.create_service(Empty, "reinitialize_global_localization",
+                                        self._on_reinitialize_global_localization))
+        made.append(self.create_service(Empty, "request_nomotion_update",
+                                        self._on_nomotion_update))
+        made.append(self.create_timer(self._settings.diagnostics_period,
+                                      self._publish_diagnostics))
         #: Scans waiting for the odometry of their times: (message, stamp ns, deadline).
         self._waiting_scans: deque[tuple[LaserScan, int, float]] = deque()
-        self.create_timer(min(SCAN_WAIT_CHECK_S, self._settings.odom_wait / 4),
-                          self._scan_waited_out)
+        made.append(self.create_timer(min(SCAN_WAIT_CHECK_S, self._scan_wait_s() / 4),
+                                      self._scan_waited_out))
+        self._configured = True
+        if self._settings.model is not None:
+            self._start(self._settings.model)
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.active = True
+        result = super().on_activate(state)
+        initial = self._frames.initial_pose
+        if initial is not None and self.localization is not None:
+            self._set_prior(initial, np.diag(AMCL_INITIAL_COVARIANCE), None)
+        elif self._pending_initial_pose is not None:
+            self._on_initial_pose(self._pending_initial_pose)
+        elif self.localization is not None:
+            self._publish()
+        self._pending_initial_pose = None
+        return result
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.active = False
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.active = False
+        self._release()
+        return TransitionCallbackReturn.SUCCESS
+
+    def _release(self) -> None:
+        """Undo on_configure: every handle it made, the belief and the tf buffer."""
+        if not self._configured:
+            return
+        self._configured = False
+        for handle in self._made:
+            if isinstance(handle, Timer):
+                self.destroy_timer(handle)
+            elif isinstance(handle, Service):
+                self.destroy_service(handle)
+            else:
+                self.destroy_subscription(handle)
+        self._made = []
+        for publisher in (self._pose_pub, self._belief_pub, self._quality_pub, self._cloud_pub,
+                          self._diagnostics_pub):
+            self.destroy_lifecycle_publisher(publisher)
+        if self._tf_listener is not None:
+            self._tf_listener.destroy()
+        self.tf_buffer = TransformBuffer()
+        self.localization = None
+        self._map_odom = None
+        self._laser_mounts = {}
+
+    def _scan_wait_s(self) -> float:
+        return self._frames.transform_tolerance if self._frames.odometry_from_tf \
+            else self._settings.odom_wait
 
     def _start(self, model: grid.GridModel) -> None:
         self.localization = self._settings.localization(model)
@@ -138,7 +249,19 @@ class GridLocalizer(Node):
             f"ready: {cols} x {rows} cells of {model.resolution} m, {model.heading_bins} "
             f"headings ({model.free.sum() * model.heading_bins} free states); belief uniform "
             f"over the free cells")
-        self._publish()
+        if self._frames.laser_pose is not None or not self._frames.odometry_from_tf:
+            self.localization.set_laser_pose(self._frames.laser_pose or (0.0, 0.0, 0.0))
+        if self.active:
+            self._publish()
+
+    def _on_time_jump_back(self) -> None:
+        """Time went back (a bag played again): start over, as AMCL does."""
+        if self.localization is not None:
+            self.localization = self._settings.localization(self.localization.model)
+        self._waiting_scans.clear()
+        self._map_odom = None
+        self.handled["time_jumped_back"] += 1
+        self.get_logger().warning("time jumped back: the belief is uniform again")
 
     # --- inputs -----------------------------------------------------------------------------
 
@@ -156,13 +279,19 @@ class GridLocalizer(Node):
         if not finite_pose(pose):
             self._reject("non_finite_odom", "odom dropped: its pose is not finite")
             return
-        if self.localization is None:
+        if self.localization is None or not self.active:
             return
-        step = self.localization.on_odometry(pose, stamp_or_none(msg.header.stamp))
+        if self._take_odometry(pose, stamp_or_none(msg.header.stamp)):
+            self._use_waiting_scans()
+
+    def _take_odometry(self, pose: tuple[float, float, float], stamp: int | None) -> bool:
+        """Follow one odometry pose (a message's, or the tree's at a scan's time)."""
+        assert self.localization is not None
+        step = self.localization.on_odometry(pose, stamp)
         if step is OdometryStep.JUMP:
             self._reject("odom_jump", f"odom jumped more than {self._settings.max_odom_jump} m:"
                          " not taken as motion; followed from the new pose")
-            return
+            return False
         if step is OdometryStep.REPEATED_STAMP:
             # Not a fault of the message: real logs repeat stamps (a driver polling faster
             # than its clock ticks). Counted, and said once.
@@ -170,27 +299,66 @@ class GridLocalizer(Node):
                 self.get_logger().info("odom repeats a stamp: the first pose at a time is "
                                        "kept, later ones ignored (handled.odom_repeated_stamp)")
             self.handled["odom_repeated_stamp"] += 1
-            return
+            return False
         self.handled["odom"] += 1
-        self._use_waiting_scans()
+        return True
 
     def _use_waiting_scans(self) -> None:
         """The waiting scans whose odometry came, in order."""
         waiting = self._waiting_scans
-        while waiting and self.localization is not None \
-                and self.localization.odometry_covers(waiting[0][1]):
+        while waiting and self.localization is not None and self._ready(*waiting[0][:2]):
             msg, stamp, _ = waiting.popleft()
             self._use_scan(msg, stamp)
+
+    def _ready(self, msg: LaserScan, stamp: int) -> bool:
+        """Whether the odometry (and, from tf, the mount) of a scan's time is known; from
+        tf, the tree's odometry at that time is then followed."""
+        assert self.localization is not None
+        if not self._frames.odometry_from_tf:
+            return self.localization.odometry_covers(stamp)
+        frames = self._frames
+        try:
+            odom_base = self.tf_buffer.lookup(frames.odom_frame_id, frames.base_frame_id, stamp)
+            mount = self._laser_mount(msg.header.frame_id, stamp)
+        except Extrapolation:
+            return False      # the transforms of its time are still on their way
+        except LookupFailed as error:
+            self._warnings.warn("tf_lookup", f"scan waits: {error}")
+            return False
+        self.localization.set_laser_pose(mount)
+        self._take_odometry(odom_base.as_planar(), stamp)
+        return True
+
+    def _laser_mount(self, frame: str, stamp: int) -> tuple[float, float, float]:
+        """The laser's (x, y, yaw) on the robot: the parameter, or the tree's (kept once
+        found: a mount is static)."""
+        if self._frames.laser_pose is not None:
+            return self._frames.laser_pose
+        if frame in ("", self._frames.base_frame_id):
+            return (0.0, 0.0, 0.0)
+        if frame not in self._laser_mounts:
+            mount = self.tf_buffer.lookup(self._frames.base_frame_id, frame, stamp).as_planar()
+            self._laser_mounts[frame] = mount
+            self.get_logger().info(
+                f"laser mount from tf: {frame} at ({mount[0]:.3f}, {mount[1]:.3f}) m, "
+                f"{math.degrees(mount[2]):.1f} deg in {self._frames.base_frame_id}")
+        return self._laser_mounts[frame]
 
     def _scan_waited_out(self) -> None:
         waiting = self._waiting_scans
         while waiting and time.monotonic() > waiting[0][2]:
             waiting.popleft()
-            self._reject("scan_without_odometry", f"scan dropped: no odometry of its time "
-                         f"came within odom_wait ({self._settings.odom_wait:g} s)")
+            if self._frames.odometry_from_tf:
+                self._reject("scan_without_transform", "scan dropped: the transforms of its "
+                             f"time did not come within transform_tolerance "
+                             f"({self._frames.transform_tolerance:g} s)")
+            else:
+                self._reject("scan_without_odometry", f"scan dropped: no odometry of its time "
+                             f"came within odom_wait ({self._settings.odom_wait:g} s)")
+        self._use_waiting_scans()
 
     def _on_scan(self, msg: LaserScan) -> None:
-        if self.localization is None:
+        if self.localization is None or not self.active:
             return
         if not (math.isfinite(msg.angle_increment) and msg.angle_increment != 0
                 and math.isfinite(msg.angle_min)):
@@ -199,24 +367,26 @@ class GridLocalizer(Node):
             return
         stamp = stamp_or_none(msg.header.stamp)
         self.scan_gaps.note(stamp, msg.scan_time)
-        if stamp is not None and (self._waiting_scans
-                                  or not self.localization.odometry_covers(stamp)):
+        if stamp is None and self._frames.odometry_from_tf:
+            self._reject("unstamped_scan", "scan dropped: no stamp to look its transforms up at")
+            return
+        if stamp is not None and (self._waiting_scans or not self._ready(msg, stamp)):
             # The odometry of the scan's time is still on its way (another topic): wait for
             # it, so the update does not depend on which came first; behind older scans
             # that wait, to keep their order.
             if len(self._waiting_scans) == WAITING_SCANS:
                 self._waiting_scans.popleft()
                 self.handled["scan_superseded"] += 1
-            self._waiting_scans.append((msg, stamp,
-                                        time.monotonic() + self._settings.odom_wait))
+            self._waiting_scans.append((msg, stamp, time.monotonic() + self._scan_wait_s()))
             self._use_waiting_scans()
             return
         self._use_scan(msg, stamp)
 
     def _use_scan(self, msg: LaserScan, stamp: int | None) -> None:
         assert self.localization is not None
-        if not self.localization.due(stamp):
+        if not (self.localization.due(stamp) or self._force_update):
             self.handled["scan_without_motion"] += 1
+            self._broadcast(stamp)
             return
         ranges, angles, nan = scan_beams(msg, self._settings.sensor.max_range,
                                          self._settings.max_beams)
@@ -231,13 +401,35 @@ class GridLocalizer(Node):
         except errors.EstimationError as error:   # what scan_beams let through, or the motion
             self._reject("bad_scan", f"scan dropped: {error}")
             return
+        self._force_update = False
         self.last_update_s = time.perf_counter() - started
         self.update_times.append(self.last_update_s)
         self.handled["scan"] += 1
-        self._publish(Time.from_msg(msg.header.stamp))
+        estimate = self._publish(Time.from_msg(msg.header.stamp))
+        self._map_odom = self._map_to_odom(estimate.pose, stamp)
+        self._broadcast(stamp)
         # Busy: the whole answer to the scan, the estimate (its scan fit) and the publishing
         # included.
         self._busy_s += time.perf_counter() - started
+
+    def _map_to_odom(self, pose: tuple[float, float, float],
+                     stamp: int | None) -> Transform | None:
+        """map -> odom such that map -> odom -> base_link at the scan's time is ``pose``."""
+        assert self.localization is not None
+        odometry = self.localization.odometry_at(stamp)
+        if odometry is None:
+            return None
+        return Transform.planar(*pose) * Transform.planar(*odometry).inverse()
+
+    def _broadcast(self, stamp: int | None) -> None:
+        """map -> odom on /tf, future-dated by transform_tolerance (AMCL's meaning)."""
+        if self._tf_broadcaster is None or self._map_odom is None:
+            return
+        now = stamp if stamp is not None else self.get_clock().now().nanoseconds
+        stamp_ns = now + round(self._frames.transform_tolerance * 1e9)
+        self._tf_broadcaster.send([to_message(self._frames.global_frame_id,
+                                              self._frames.odom_frame_id, stamp_ns,
+                                              self._map_odom)])
 
     def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
         pose = planar_pose(msg.pose.pose)
@@ -245,8 +437,18 @@ class GridLocalizer(Node):
         if not (finite_pose(pose) and np.isfinite(covariance).all()):
             self._reject("bad_initialpose", "initialpose dropped: not finite")
             return
+        if not self.active:
+            self._pending_initial_pose = msg     # taken at activation, as AMCL does
+            return
         if self.localization is None:
             return
+        stamp = Time.from_msg(msg.header.stamp) if stamp_or_none(msg.header.stamp) is not None \
+            else None
+        self._set_prior(pose, covariance, stamp)
+
+    def _set_prior(self, pose: tuple[float, float, float], covariance: np.ndarray,
+                   stamp: Time | None) -> None:
+        assert self.localization is not None
         try:
             self.localization.set_prior(pose, covariance)
         except errors.EstimationError as error:   # not a covariance, or singular
@@ -257,12 +459,12 @@ class GridLocalizer(Node):
                                f"{math.degrees(pose[2]):.0f} deg) taken as the prior")
         # Stamped with the initial pose's time: the belief as of that prior (and a replay
         # of the run tells it from an update by that stamp).
-        stamped = stamp_or_none(msg.header.stamp) is not None
-        self._publish(Time.from_msg(msg.header.stamp) if stamped else None)
+        self._publish(stamp)
 
     def _on_global_localization(self, _request, response: Trigger.Response):
-        if self.localization is None:
-            response.success, response.message = False, "no map yet"
+        if self.localization is None or not self.active:
+            response.success = False
+            response.message = "no map yet" if self.active else "not active"
             return response
         self.localization.global_localization()
         self._publish()
@@ -273,25 +475,51 @@ class GridLocalizer(Node):
     def _on_reset(self, request, response: Trigger.Response):
         return self._on_global_localization(request, response)
 
+    def _on_reinitialize_global_localization(self, _request, response: Empty.Response):
+        """nav2_amcl's service: the belief uniform over the free cells."""
+        self._on_global_localization(None, Trigger.Response())
+        return response
+
+    def _on_nomotion_update(self, _request, response: Empty.Response):
+        """nav2_amcl's service: the next scan updates the belief without motion."""
+        self._force_update = True
+        return response
+
     # --- outputs ----------------------------------------------------------------------------
 
-    def _publish(self, stamp: Time | None = None) -> None:
+    def _publish(self, stamp: Time | None = None):
         assert self.localization is not None
         model = self.localization.model
         estimate = self.localization.estimate(self._settings.quality_radius,
                                               self._settings.quality_angle)
+        if not self.active:
+            return estimate
         stamp_msg = (stamp or self.get_clock().now()).to_msg()
+        frame = self._frames.global_frame_id
         # The quality first, then its pose. A subscriber pairs them by this order of
         # publication (the source timestamps), not by the order its callbacks run, which
         # may take a ready pose before the quality that came with it (tools/demo/grid_run.py).
         self._quality_pub.publish(Float64(data=estimate.quality))
         msg = pose_with_covariance(self._pose_msg, estimate.pose, estimate.covariance)
         msg.header.stamp = stamp_msg
-        msg.header.frame_id = self._settings.frame_id
+        msg.header.frame_id = frame
         self._pose_pub.publish(msg)
         self._belief_pub.publish(occupancy_grid(self.localization.belief_map(),
-                                                model.resolution, model.origin,
-                                                self._settings.frame_id, stamp_msg))
+                                                model.resolution, model.origin, frame,
+                                                stamp_msg))
+        if self._cloud_pub.get_subscription_count():
+            self._cloud_pub.publish(self._particle_cloud(stamp_msg))
+        return estimate
+
+    def _particle_cloud(self, stamp_msg) -> PoseArray:
+        assert self.localization is not None
+        cloud = PoseArray()
+        cloud.header.stamp, cloud.header.frame_id = stamp_msg, self._frames.global_frame_id
+        for (x, y, yaw), _ in self.localization.most_likely_states(PARTICLE_CLOUD_STATES):
+            pose = Pose()
+            fill_pose(pose, x, y, yaw)
+            cloud.poses.append(pose)
+        return cloud
 
     def _busy_since_last_report(self) -> float:
         """The share of the time since the last report spent in updates (0..1)."""
@@ -305,6 +533,8 @@ class GridLocalizer(Node):
         self._warnings.warn(reason, f"{message} (rejected so far: {self.rejected[reason]})")
 
     def _publish_diagnostics(self) -> None:
+        if not self.active:
+            return
         values: dict[str, Any] = {"map": "waiting for map" if self.localization is None
                                   else "loaded"}
         if self.localization is not None:

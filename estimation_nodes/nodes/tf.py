@@ -61,17 +61,20 @@ class TransformListener:
 
     ``future_tolerance_ns``: a dynamic transform stamped further than this ahead of the
     node's clock is refused (None: no such check). ``on_jump_back`` is called after the
-    buffer was cleared for a clock that went back.
+    buffer was cleared for a clock that went back; ``on_transforms`` after each message
+    taken (a node waiting for a transform looks again).
     """
 
     def __init__(self, node: Node, buffer: TransformBuffer,
                  future_tolerance_ns: int | None = None,
                  on_jump_back: Callable[[], None] | None = None,
+                 on_transforms: Callable[[], None] | None = None,
                  tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
         self._node = node
         self.buffer = buffer
         self._future_ns = future_tolerance_ns
         self._on_jump_back = on_jump_back
+        self._on_transforms = on_transforms
         self.dropped: Counter[str] = Counter()
         self._warnings = ThrottledWarnings(node.get_logger())
         self._subscriptions = [
@@ -89,6 +92,8 @@ class TransformListener:
         now = None if self._future_ns is None else self._node.get_clock().now().nanoseconds
         for transform in msg.transforms:
             self.add(transform, static, now)
+        if self._on_transforms is not None:
+            self._on_transforms()
 
     def add(self, msg: TransformStamped, static: bool, now_ns: int | None = None) -> bool:
         """One transform into the buffer; False (counted, warned) when it was refused."""

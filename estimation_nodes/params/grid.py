@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -17,19 +17,71 @@ from estimation_nodes.params.map_files import read_map_file
 from estimation_nodes.params.specs import GRID_MODEL_SPECS, UNSET, spec_defaults
 
 
+def laser_pose_given(values: Mapping[str, Any]) -> tuple[float, float, float] | None:
+    """The ``laser_pose`` parameter, or None where it is unset (the localizer's default)."""
+    given = values["laser_pose"]
+    if given is UNSET or not len(given):
+        return None
+    if len(given) != 3 or not all(math.isfinite(v) for v in given):
+        raise ValueError(f"laser_pose: expected [x, y, yaw], got {list(given)}")
+    return (float(given[0]), float(given[1]), float(given[2]))
+
+
 def sensor_field(values: Mapping[str, Any]) -> SensorField:
     """The likelihood field's parameters from a node's values (GRID_MODEL_SPECS)."""
     return SensorField(z_hit=values["laser_z_hit"], z_rand=values["laser_z_rand"],
                        sigma_hit=values["laser_sigma_hit"],
                        max_range=values["laser_max_range"],
                        max_distance=values["laser_likelihood_max_dist"],
-                       laser_pose=tuple(values["laser_pose"]))
+                       laser_pose=laser_pose_given(values) or (0.0, 0.0, 0.0))
 
 
 def odometry_noise(values: Mapping[str, Any]) -> OdometryNoise:
     """The odometry motion model's noise from a node's values (GRID_MODEL_SPECS)."""
     return OdometryNoise(alpha1=values["alpha1"], alpha2=values["alpha2"],
                          alpha3=values["alpha3"], alpha4=values["alpha4"])
+
+
+#: AMCL's initial covariance for initial_pose (0.5 m, 0.5 m, pi/12 std).
+AMCL_INITIAL_COVARIANCE = (0.25, 0.25, (math.pi / 12) ** 2)
+ODOMETRY_SOURCES = ("tf", "topic")
+
+
+@dataclass(frozen=True)
+class GridFrames:
+    """How the localizer sits in the tf tree (nav2_amcl's names)."""
+
+    odometry_from_tf: bool = True
+    odom_frame_id: str = "odom"
+    base_frame_id: str = "base_link"
+    global_frame_id: str = "map"
+    tf_broadcast: bool = True
+    transform_tolerance: float = 1.0
+    #: The laser's mount given as a parameter, or None: from the tree (odometry from tf) or
+    #: the robot's origin (odometry from the topic).
+    laser_pose: tuple[float, float, float] | None = None
+    #: (x, y, yaw) to start from (set_initial_pose), or None.
+    initial_pose: tuple[float, float, float] | None = None
+
+
+def grid_frames(values: Mapping[str, Any]) -> GridFrames:
+    if values["odometry_source"] not in ODOMETRY_SOURCES:
+        raise ValueError(f"odometry_source: expected one of {', '.join(ODOMETRY_SOURCES)}, "
+                         f"got {values['odometry_source']!r}")
+    for name in ("odom_frame_id", "base_frame_id", "global_frame_id"):
+        if not values[name].strip():
+            raise ValueError(f"{name}: expected a frame name, got an empty string")
+    if len({values["odom_frame_id"], values["base_frame_id"], values["global_frame_id"]}) < 3:
+        raise ValueError("odom_frame_id, base_frame_id, global_frame_id: expected three "
+                         "different frames")
+    initial = (values["initial_pose.x"], values["initial_pose.y"], values["initial_pose.yaw"])
+    return GridFrames(
+        odometry_from_tf=values["odometry_source"] == "tf",
+        odom_frame_id=values["odom_frame_id"], base_frame_id=values["base_frame_id"],
+        global_frame_id=values["global_frame_id"], tf_broadcast=values["tf_broadcast"],
+        transform_tolerance=values["transform_tolerance"],
+        laser_pose=laser_pose_given(values),
+        initial_pose=initial if values["set_initial_pose"] else None)
 
 
 @dataclass(frozen=True)
@@ -56,11 +108,11 @@ class GridLocalizerSettings:
     quality_radius: float
     #: quality_angle, in radians.
     quality_angle: float
-    frame_id: str
     history_depth: int
     diagnostics_period: float
     #: Whether the published pose is refined by the scan's fit (grid/scan_fit.py).
     scan_fit: bool = False
+    frames: GridFrames = field(default_factory=GridFrames)
 
     def model_for(self, occupancy: OccupancyMap) -> GridModel:
         return grid_model(occupancy, self.resolution, self.heading_bins, self.sensor,
@@ -77,8 +129,7 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
     """Validate the localizer's parameters; with map_file set, read it and check that it
     makes a state grid within max_states (a MapError names what is wrong)."""
     sensor = sensor_field(values)
-    if not values["frame_id"].strip():
-        raise ValueError("frame_id: expected a frame name, got an empty string")
+    frames = grid_frames(values)
     occupancy = read_map_file(Path(values["map_file"])) if values["map_file"] else None
     model = grid_model(occupancy, values["resolution"], values["heading_bins"], sensor,
                        values["max_states"], values["scan_fit"]) if occupancy is not None \
@@ -92,9 +143,9 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
         belief_floor=values["belief_floor"],
         independent_beams=values["laser_independent_beams"],
         quality_radius=values["quality_radius"],
-        quality_angle=math.radians(values["quality_angle"]), frame_id=values["frame_id"],
+        quality_angle=math.radians(values["quality_angle"]),
         history_depth=values["history_depth"], diagnostics_period=values["diagnostics_period"],
-        scan_fit=values["scan_fit"])
+        scan_fit=values["scan_fit"], frames=frames)
 
 
 @dataclass(frozen=True)

@@ -254,7 +254,50 @@ GRID_MODEL_SPECS = (
               min_value=0.0, max_value=10.0),
 )
 
-GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
+#: The localizer's mount is taken from the tf tree unless laser_pose is given (an override).
+_LOCALIZER_MODEL_SPECS = tuple(
+    ParamSpec("laser_pose", UNSET, "[x, y, yaw] of the laser on the robot (m, m, rad; "
+              "base_frame_id -> the scan's frame): an override of the mount. Unset: with "
+              "odometry_source tf, the tree's transform from base_frame_id to the scan's "
+              "frame_id (/tf_static, as AMCL takes it); with odometry_source topic, "
+              "[0, 0, 0].", read_only=True, type_name="double_array")
+    if spec.name == "laser_pose" else spec for spec in GRID_MODEL_SPECS)
+
+#: nav2_amcl's names where the meaning is the same (docs/nodes/grid_localizer.md compares).
+GRID_TF_SPECS = (
+    ParamSpec("odometry_source", "tf", "Where odometry comes from: 'tf' (odom_frame_id -> "
+              "base_frame_id on /tf at each scan's time, as AMCL takes it) or 'topic' "
+              "(nav_msgs/Odometry on odom, as the package's simulator publishes it).",
+              read_only=True),
+    ParamSpec("odom_frame_id", "odom", "The odometry's frame (AMCL's odom_frame_id).",
+              read_only=True),
+    ParamSpec("base_frame_id", "base_link", "The robot's frame (AMCL's base_frame_id).",
+              read_only=True),
+    ParamSpec("global_frame_id", "map", "The map's frame: of the published pose, belief and "
+              "map -> odom (AMCL's global_frame_id).", read_only=True),
+    ParamSpec("tf_broadcast", True, "Publish global_frame_id -> odom_frame_id on /tf after "
+              "each scan, so that the tree gives map -> base_link (AMCL's tf_broadcast).",
+              read_only=True),
+    ParamSpec("transform_tolerance", 1.0, "map -> odom is stamped this long (s) after its "
+              "scan's time, so that lookups of the latest time succeed until the next scan "
+              "(AMCL's transform_tolerance); with odometry_source tf a scan also waits at most "
+              "this long for its transforms, then is dropped and counted.", read_only=True,
+              min_value=0.0, max_value=60.0),
+    ParamSpec("autostart", False, "Configure and activate at start, for running alone; "
+              "false: wait, unconfigured, for a lifecycle manager (Nav2's) to do it.",
+              read_only=True),
+    ParamSpec("set_initial_pose", False, "Take initial_pose.x, .y, .yaw as the prior at "
+              "start (AMCL's set_initial_pose; its covariance: 0.5 m, 0.5 m, 15 degrees std).",
+              read_only=True),
+    ParamSpec("initial_pose.x", 0.0, "Initial pose's x (m) when set_initial_pose.",
+              read_only=True, min_value=-1e6, max_value=1e6),
+    ParamSpec("initial_pose.y", 0.0, "Initial pose's y (m) when set_initial_pose.",
+              read_only=True, min_value=-1e6, max_value=1e6),
+    ParamSpec("initial_pose.yaw", 0.0, "Initial pose's yaw (rad) when set_initial_pose.",
+              read_only=True, min_value=-10.0, max_value=10.0),
+)
+
+GRID_LOCALIZER_SPECS = _LOCALIZER_MODEL_SPECS + GRID_TF_SPECS + (
     ParamSpec("resolution", 0.1, "Size (m) of a state cell: a whole multiple of the map's "
               "resolution; the map is reduced to it.", read_only=True, min_value=0.001,
               max_value=100.0),
@@ -302,7 +345,6 @@ GRID_LOCALIZER_SPECS = GRID_MODEL_SPECS + (
               max_value=100.0),
     ParamSpec("quality_angle", 10.0, "... and this heading difference (degrees).",
               read_only=True, min_value=0.0, max_value=180.0),
-    ParamSpec("frame_id", "map", "Frame of the published pose and belief map."),
     ParamSpec("history_depth", 1,
               "How many of the latest outputs pose, belief_map and localization_quality each "
               "keep for late subscribers (transient_local): 1 hands a late `ros2 topic echo` "

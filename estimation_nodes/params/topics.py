@@ -68,6 +68,8 @@ INITIAL_POSE = "initialpose"
 POSE = "pose"
 BELIEF_MAP = "belief_map"
 LOCALIZATION_QUALITY = "localization_quality"
+#: The belief's most likely states as a geometry_msgs/PoseArray (AMCL's particle_cloud).
+PARTICLE_CLOUD = "particle_cloud"
 TRUE_POSE = "true_pose"
 CMD_VEL = "cmd_vel"
 LANDMARK_OBSERVATIONS = "landmark_observations"

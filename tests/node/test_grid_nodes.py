@@ -22,6 +22,10 @@ from tests.conftest import REPO, spin_until
 CORRIDOR = str(REPO / "maps" / "corridor.yaml")
 
 
+#: grid_localizer as the simulator runs it: active at start, odometry from the odom topic.
+STANDALONE = {"autostart": True, "odometry_source": "topic"}
+
+
 def params(**values):
     return [Parameter(k, value=v) for k, v in values.items()]
 
@@ -31,6 +35,8 @@ def nodes(context, executor):
     made = []
 
     def make(node_class, **values):
+        if node_class is GridLocalizer:
+            values = {**STANDALONE, **values}
         node = node_class(context=context, parameter_overrides=params(**values))
         executor.add_node(node)
         made.append(node)
@@ -266,13 +272,16 @@ def test_a_map_from_the_topic_and_a_bad_one(nodes, executor, collector_factory):
     ({"map_file": "/nonexistent/map.yaml"}, "map_file"),
     ({"map_file": CORRIDOR, "resolution": 0.07}, "whole multiple"),
     ({"map_file": CORRIDOR, "max_states": 1000}, "max_states"),
-    ({"frame_id": " "}, "frame_id"),
+    ({"global_frame_id": " "}, "global_frame_id"),
+    ({"odometry_source": "wheels"}, "odometry_source"),
+    ({"odom_frame_id": "map"}, "three different frames"),
+    ({"laser_pose": [0.1, 0.2]}, "laser_pose"),
     ({"laser_pose": [0.25, 0.0]}, "laser_pose"),
     ({"laser_pose": [0.25, 0.0, float("inf")]}, "laser_pose"),
 ])
 def test_bad_localizer_parameters_are_one_clear_error(context, values, message):
     with pytest.raises(ConfigurationError, match=message):
-        GridLocalizer(context=context, parameter_overrides=params(**values))
+        GridLocalizer(context=context, parameter_overrides=params(**{**STANDALONE, **values}))
 
 
 def test_the_robot_starts_only_once_the_named_nodes_hear_it(nodes, executor, context,

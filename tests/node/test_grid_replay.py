@@ -32,6 +32,7 @@ from estimation_nodes.params.map_files import read_map_file
 from estimation_nodes.tools.recording.mcap import McapRunWriter
 from estimation_nodes.tools.replay import estimator as replay_cli
 from estimation_nodes.tools.replay.grid_localizer import replay_grid
+from tests.node.test_grid_nodes import STANDALONE
 from tests.conftest import REPO, spin_until
 from tests.node.test_grid_nodes import params
 
@@ -117,7 +118,7 @@ def test_a_run_in_which_the_localizer_left_scans_out_replays_equal(context, exec
                                                                   monkeypatch):
     monkeypatch.setattr(grid_localizer, "WAITING_SCANS", 2)
     localizer = GridLocalizer(context=context, parameter_overrides=params(
-        map_file=str(CORRIDOR), heading_bins=8))
+        map_file=str(CORRIDOR), heading_bins=8, **STANDALONE))
     executor.add_node(localizer)
     driver = Driver(context, executor, localizer)
     try:
@@ -193,7 +194,7 @@ def test_a_run_in_which_the_localizer_left_scans_out_replays_equal(context, exec
 
     path = tmp_path / "run.mcap"
     parameters = {"/grid_localizer": {"ros__parameters": {"map_file": str(CORRIDOR),
-                                                          "heading_bins": 8}}}
+                                                          "heading_bins": 8, **STANDALONE}}}
     writer = McapRunWriter(path, {**{t: _type(k) for t, k in INPUTS.items()},
                                   **{t: _type(k) for t, k in OUTPUTS.items()}},
                            {"parameters_yaml": yaml.safe_dump(parameters), "kind": "grid"})

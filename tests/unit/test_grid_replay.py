@@ -68,7 +68,7 @@ class Run:
 
     def __init__(self) -> None:
         self.values = spec_defaults(GRID_LOCALIZER_SPECS)
-        self.values.update(map_file=str(CORRIDOR), heading_bins=8)
+        self.values.update(map_file=str(CORRIDOR), heading_bins=8, odometry_source="topic")
         self.settings = build_grid_localizer_settings(self.values)
         self.localization = self.settings.localization(self.settings.model)
         self.records: list[Recorded] = []

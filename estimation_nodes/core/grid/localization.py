@@ -34,6 +34,7 @@ on it are not checked again.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from bisect import bisect_right
 from collections import deque
@@ -206,6 +207,21 @@ class GridLocalization:
         stamp_ns = check_integer("stamp_ns", stamp_ns)
         return bool(self._history) and self._history[-1][0] >= stamp_ns
 
+    def odometry_at(self, stamp_ns: int | None) -> Pose | None:
+        """The odometry pose an update at ``stamp_ns`` predicts to (None: none yet)."""
+        return self._odometry_at(_stamp(stamp_ns))
+
+    def set_laser_pose(self, laser_pose: tuple[float, float, float]) -> None:
+        """Score scans from this mount from now on (one read from the tf tree at the first
+        scan); the belief is unchanged."""
+        model = self.model
+        if tuple(model.laser_pose) == tuple(grid.mounting_pose(laser_pose)):
+            return
+        fit = model.scan_fit
+        self.model = dataclasses.replace(
+            model, laser_pose=laser_pose,
+            scan_fit=None if fit is None else dataclasses.replace(fit, laser_pose=laser_pose))
+
     def _odometry_at(self, stamp_ns: int | None) -> Pose | None:
         """The latest odometry pose at or before ``stamp_ns`` (the latest one, without)."""
         if stamp_ns is None or not self._history:
@@ -332,6 +348,23 @@ class GridLocalization:
         quality = sum(grid._mass_near(part, model, pose, radius, angle, where)
                       for where, part in windows)
         return Estimate(pose, covariance, float(quality))
+
+    def most_likely_states(self, count: int) -> list[tuple[Pose, float]]:
+        """The ``count`` most probable states with their probability, most probable first
+        (the poses of their cells and headings): what RViz's particle cloud shows of a
+        particle filter."""
+        count = check_integer("count", count)
+        found: list[tuple[float, Pose]] = []
+        for box in self._boxes:
+            part = window.window_of(self.belief, box)
+            flat = part.ravel()
+            n = min(count, flat.size)
+            for index in np.argpartition(flat, flat.size - n)[flat.size - n:]:
+                if flat[index] > 0.0:
+                    k, i, j = (int(v) for v in np.unravel_index(index, part.shape))
+                    found.append((float(flat[index]), grid._pose_of(self.model, (k, i, j), box)))
+        found.sort(key=lambda pair: -pair[0])
+        return [(pose, p) for p, pose in found[:count]]
 
     def belief_map(self) -> np.ndarray:
         windows = [(box, window.window_of(self.belief, box)) for box in self._boxes]

@@ -42,6 +42,7 @@ import numpy as np
 
 from estimation_nodes.core import errors
 from estimation_nodes.core.grid.localization import Estimate, GridLocalization
+from estimation_nodes.core.transforms.buffer import LookupFailed, TransformBuffer
 from estimation_nodes.core.validation import check_covariance
 from estimation_nodes.nodes.grid_messages import (
     covariance_3x3,
@@ -51,7 +52,9 @@ from estimation_nodes.nodes.grid_messages import (
     scan_beams,
 )
 from estimation_nodes.params import topics
-from estimation_nodes.params.grid import GridLocalizerSettings, build_grid_localizer_settings
+from estimation_nodes.nodes.tf import from_message
+from estimation_nodes.params.grid import (GridFrames, GridLocalizerSettings,
+                                          build_grid_localizer_settings)
 from estimation_nodes.params.param_files import read_node_parameters
 from estimation_nodes.params.scenarios import DEFAULT_KIND, scenario_kind
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults
@@ -59,6 +62,7 @@ from estimation_nodes.params.wording import plural
 from estimation_nodes.tools.recording.mcap import RecordingError
 
 MAP, SCAN, ODOM = f"/{topics.MAP}", f"/{topics.SCAN}", f"/{topics.ODOM}"
+TF, TF_STATIC = "/tf", "/tf_static"
 INITIAL_POSE, POSE = f"/{topics.INITIAL_POSE}", f"/{topics.POSE}"
 QUALITY = f"/{topics.LOCALIZATION_QUALITY}"
 
@@ -222,9 +226,10 @@ def replay_grid(path: Path, parameters_yaml: str | None, tolerance: float) -> Gr
     published; its parameters from ``parameters_yaml`` or else the recording's."""
     records, metadata = recorded_records(path)
     values = spec_defaults(GRID_LOCALIZER_SPECS)
-    values.update(read_node_parameters(parameters_yaml if parameters_yaml is not None
-                                       else metadata.get("parameters_yaml", ""),
-                                       "/grid_localizer"))
+    given = read_node_parameters(parameters_yaml if parameters_yaml is not None
+                                 else metadata.get("parameters_yaml", ""), "/grid_localizer")
+    # A run recorded before odometry could come from tf took it from the odom topic.
+    values.update({"odometry_source": "topic", **given})
     try:
         return replay_records(records, values, tolerance)
     except errors.MapError as error:
@@ -236,7 +241,7 @@ def replay_records(records: list[Recorded], values: dict, tolerance: float) -> G
     parameter ``values``; every output compared (see the module's docstring)."""
     settings = build_grid_localizer_settings(values)
     steps = localizer_steps(records, map_from_topic=settings.model is None)
-    inputs = _InputsInStampOrder(records)
+    inputs = _InputsInStampOrder(records, settings.frames)
     comparison = GridComparison()
     localization: GridLocalization | None = None
 
@@ -305,11 +310,18 @@ def replay_records(records: list[Recorded], values: dict, tolerance: float) -> G
 
 class _InputsInStampOrder:
     """The recorded odometry and scans by their stamps, fed to the offline localizer up to
-    each scan it updates with."""
+    each scan it updates with. With odometry from tf, each scan's odometry is the recorded
+    tree's odom -> base_link at its time (and its mount the tree's), as the node takes it."""
 
-    def __init__(self, records: list[Recorded]) -> None:
-        events = [(header_stamp_ns(r.msg), 0, r.msg) for r in records if r.topic == ODOM]
-        events += [(header_stamp_ns(r.msg), 1, r.msg) for r in records if r.topic == SCAN]
+    def __init__(self, records: list[Recorded], frames: GridFrames) -> None:
+        scans = [(header_stamp_ns(r.msg), 1, r.msg) for r in records if r.topic == SCAN]
+        self._frames = frames
+        self._tree = _recorded_tree(records) if frames.odometry_from_tf else None
+        if self._tree is None:
+            events = [(header_stamp_ns(r.msg), 0, r.msg) for r in records if r.topic == ODOM]
+        else:
+            events = [(stamp, 0, _TreeAt(scan)) for stamp, _, scan in scans]
+        events += scans
         events.sort(key=lambda event: event[:2])
         self._events = events
         self._next = 0
@@ -325,9 +337,7 @@ class _InputsInStampOrder:
             stamp, rank, msg = events[self._next]
             self._next += 1
             if rank == 0:
-                pose = planar_pose(msg.pose.pose)
-                if finite_pose(pose):             # the localizer drops the others
-                    localization.on_odometry(pose, stamp or None)
+                self._odometry(msg, stamp, localization)
             # Before the first update the localizer may not have been there yet.
             elif (take is not None or localization.updates) and localization.due(stamp):
                 due += 1
@@ -337,6 +347,48 @@ class _InputsInStampOrder:
         while self._next < len(events) and events[self._next][:2] == (stamp_ns, 1):
             self._next += 1
         return due
+
+    def _odometry(self, msg: Any, stamp: int, localization: GridLocalization) -> None:
+        if not isinstance(msg, _TreeAt):
+            pose = planar_pose(msg.pose.pose)
+            if finite_pose(pose):             # the localizer drops the others
+                localization.on_odometry(pose, stamp or None)
+            return
+        assert self._tree is not None
+        frames = self._frames
+        scan_frame = msg.scan.header.frame_id
+        try:
+            odom_base = self._tree.lookup(frames.odom_frame_id, frames.base_frame_id, stamp)
+            mount = frames.laser_pose or ((0.0, 0.0, 0.0)
+                                          if scan_frame in ("", frames.base_frame_id) else
+                                          self._tree.lookup(frames.base_frame_id, scan_frame,
+                                                            stamp).as_planar())
+        except LookupFailed:
+            return                            # the localizer dropped this scan too
+        localization.set_laser_pose(mount)
+        localization.on_odometry(odom_base.as_planar(), stamp)
+
+
+@dataclass(frozen=True)
+class _TreeAt:
+    """The tree's odometry at a scan's time (an event of the replay)."""
+
+    scan: Any
+
+
+def _recorded_tree(records: list[Recorded]) -> TransformBuffer:
+    """Every recorded /tf and /tf_static transform, kept for the whole run; those the
+    localizer's buffer refuses are refused here too."""
+    tree = TransformBuffer(cache_time_ns=1 << 62)
+    for record in records:
+        if record.topic not in (TF, TF_STATIC):
+            continue
+        for transform in record.msg.transforms:
+            try:
+                tree.set_transform(*from_message(transform), static=record.topic == TF_STATIC)
+            except errors.EstimationError:
+                continue
+    return tree
 
 
 def _model(settings: GridLocalizerSettings, maps: tuple, records: list[Recorded]):
