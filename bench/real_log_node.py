@@ -2,7 +2,7 @@
 
     python bench/real_log_node.py [--log intel|aces|PATH] [--scan-rate 10]
         [--resolution 0.1] [--heading-bins 72] [--max-odom-jump 5] [--seconds S]
-        [--picture FILE.png] [--keep DIR] [--record FILE.mcap]
+        [--picture FILE.png] [--keep DIR] [--record FILE.mcap] [--tf]
 
 What a user does with a CARMEN log, through the real executables: ``estimation_import
 carmen`` makes a recording, ``estimation_map`` a map from its corrected poses (0.05 m),
@@ -16,6 +16,15 @@ Printed: the scans played and their rate, what the node did with them from its
 /diagnostics (updated, not due for lack of motion, missed, rejected), its update time
 (median and maximum, its own measure), its peak resident memory (VmHWM), and the
 published poses against the corrected pose of their scan (paired by stamp).
+
+With ``--tf`` the run is a robot's as nav2_amcl sees it: the log imported with its tf tree
+and the laser mounted ``TF_LASER_AHEAD`` m forward (``--laser-ahead``: base_link, its
+odometry and its truth that far behind the laser), played with ``--clock`` without
+/odom (/scan, /tf, /tf_static), the localizer with ``odometry_source: tf`` and
+``use_sim_time``, configured and activated through its lifecycle services as Nav2's
+lifecycle manager does; besides the pose topic, map -> base_link through the /tf it
+publishes (its map -> odom for the scan, with the tree's odom -> base_link at the scan's
+time) is scored against the truth.
 
 With ``--record`` the bench also records the run as ``estimation_demo --record`` does
 (the scans and odometry as the bench's node heard them, the initial pose it sent, the
@@ -59,13 +68,20 @@ def executable(name: str) -> str:
     return str(Path(sys.executable).parent / name)
 
 
-def prepare(log_path: Path, work: Path) -> tuple[Path, Path]:
+#: --tf: the laser this far (m) ahead of base_link in the imported tree.
+TF_LASER_AHEAD = 0.25
+
+
+def prepare(log_path: Path, work: Path, laser_ahead: float) -> tuple[Path, Path]:
     """The recording and the map, made by the package's own tools."""
     recording, stem = work / "run.mcap", work / "map"
     subprocess.run([executable("estimation_import"), "carmen", str(log_path), "-o",
-                    str(recording), "--range-max", str(RANGE_MAX)], check=True,
+                    str(recording), "--range-max", str(RANGE_MAX),
+                    "--laser-ahead", str(laser_ahead)], check=True,
                    stdout=subprocess.DEVNULL)
-    subprocess.run([executable("estimation_map"), str(recording), "-o", str(stem)],
+    # The truth is base_link's: the map is made from the laser's poses, laser_ahead before.
+    subprocess.run([executable("estimation_map"), str(recording), "-o", str(stem),
+                    "--laser-pose", str(laser_ahead), "0", "0"],
                    check=True, stdout=subprocess.DEVNULL)
     return recording, stem.with_suffix(".yaml")
 
@@ -89,8 +105,14 @@ class Watcher:
 
         from estimation_nodes.nodes.qos import latched_qos
 
+        from estimation_nodes.core.transforms.buffer import TransformBuffer
+        from estimation_nodes.nodes.tf import TransformListener
+
         self.node = Node("real_log_bench")
         self.poses: dict[int, tuple[float, float, float]] = {}
+        #: Everything heard on /tf and /tf_static, kept for the whole run.
+        self.tree = TransformBuffer(cache_time_ns=1 << 62)
+        TransformListener(self.node, self.tree)
         self.diagnostics: dict[str, str] = {}
         self.node.create_subscription(PoseWithCovarianceStamped, "pose", self._on_pose,
                                       latched_qos(1000))
@@ -102,19 +124,51 @@ class Watcher:
         self.executor.add_node(self.node)
         self.recorder: RunRecorder | None = None
 
-    def record(self) -> None:
+    def record(self, tf: bool) -> None:
         """Keep every input the localizer hears and every pose and quality it publishes."""
         from rclpy.qos import QoSProfile, ReliabilityPolicy
 
         from estimation_nodes.nodes.qos import latched_qos
+        from estimation_nodes.nodes.tf import TF_QOS, TF_STATIC_QOS
 
         best_effort = QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT)
         pose_type = "geometry_msgs/msg/PoseWithCovarianceStamped"
+        inputs = {"/tf": ("tf2_msgs/msg/TFMessage", TF_QOS),
+                  "/tf_static": ("tf2_msgs/msg/TFMessage", TF_STATIC_QOS)} if tf \
+            else {"/odom": ("nav_msgs/msg/Odometry", 1000)}
         self.recorder = RunRecorder(self.node, {
-            "/scan": ("sensor_msgs/msg/LaserScan", best_effort),
-            "/odom": ("nav_msgs/msg/Odometry", 1000),
+            "/scan": ("sensor_msgs/msg/LaserScan", best_effort), **inputs,
             "/pose": (pose_type, latched_qos(1000)),
             "/localization_quality": ("std_msgs/msg/Float64", latched_qos(1000))})
+
+    def activate(self, node_name: str) -> None:
+        """Configure and activate the localizer as Nav2's lifecycle manager does."""
+        from lifecycle_msgs.msg import Transition
+        from lifecycle_msgs.srv import ChangeState
+
+        client = self.node.create_client(ChangeState, f"/{node_name}/change_state")
+        if not self.spin(client.service_is_ready, 60):
+            sys.exit("real_log_node: the localizer's lifecycle services never came")
+        for transition in (Transition.TRANSITION_CONFIGURE, Transition.TRANSITION_ACTIVATE):
+            future = client.call_async(ChangeState.Request(
+                transition=Transition(id=transition)))
+            if not self.spin(future.done, 300) or not future.result().success:
+                sys.exit(f"real_log_node: lifecycle transition {transition} failed")
+
+    def through_tf(self, tolerance_s: float) -> dict[int, tuple[float, float, float]]:
+        """map -> base_link at each pose's scan time through the heard tree: the map -> odom
+        sent for that scan (stamped tolerance_s after it) and odom -> base_link then."""
+        from estimation_nodes.core.transforms.buffer import LookupFailed
+
+        found = {}
+        for stamp in self.poses:
+            try:
+                map_odom = self.tree.lookup("map", "odom", stamp + round(tolerance_s * 1e9))
+                odom_base = self.tree.lookup("odom", "base_link", stamp)
+            except LookupFailed:
+                continue
+            found[stamp] = (map_odom * odom_base).as_planar()
+        return found
 
     def _on_pose(self, msg) -> None:
         from estimation_nodes.nodes.grid_messages import planar_pose
@@ -152,7 +206,8 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
     import rclpy
 
     log = carmen.read_log(log_path)
-    recording, map_yaml = prepare(log_path, work)
+    laser_ahead = TF_LASER_AHEAD if args.tf else 0.0
+    recording, map_yaml = prepare(log_path, work, laser_ahead)
     if args.record:
         map_yaml = beside(args.record, map_yaml)
     period = float(np.median(np.diff([scan.t for scan in log.scans])))
@@ -167,20 +222,22 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
     rclpy.init()
     watcher = Watcher()
     if args.record:
-        watcher.record()
+        watcher.record(args.tf)
     play = None
     try:
+        if args.tf:
+            watcher.activate("grid_localizer")
         if not wait_for_line(localizer, work / "localizer.log", "ready:", 300):
             sys.exit("real_log_node: the localizer never said ready:\n"
                      + (work / "localizer.log").read_text())
         watcher.spin(lambda: watcher.initial.get_subscription_count() > 0 and watcher.poses,
                      60)
         count = len(watcher.poses)
-        watcher.give_initial_pose(log.scans[0].pose)
+        watcher.give_initial_pose(behind(log.scans[0].pose, laser_ahead))
         watcher.spin(lambda: len(watcher.poses) > count, 30)
+        inputs = ["/scan", "/tf", "/tf_static", "--clock"] if args.tf else ["/scan", "/odom"]
         play_command = [executable("estimation_play"), str(recording), "--rate", f"{rate:g}",
-                        "--topics", "/scan", "/odom", "--wait-for-subscribers", "30",
-                        "--delay", "2"]
+                        "--topics", *inputs, "--wait-for-subscribers", "30", "--delay", "2"]
         play = subprocess.Popen(play_command, env=env, stdout=(work / "play.log").open("w"),
                                 stderr=subprocess.STDOUT)
         limit = args.seconds or (log.scans[-1].t - log.scans[0].t) / rate + 60
@@ -195,7 +252,7 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
         end_run(play, localizer, watcher.node)
     if args.picture:
         draw(log, watcher, map_yaml, args.picture, log_path.name)
-    rows = summary(log, watcher, rate, played_s, peak)
+    rows = summary(log, watcher, rate, played_s, peak, laser_ahead)
     if watcher.recorder is not None:
         rows += watcher.recorder.write_and_replay(
             args.record, {"parameters_yaml": parameters_yaml, "kind": "grid"},
@@ -215,16 +272,22 @@ def beside(recording: Path, map_yaml: Path) -> Path:
     return folder / map_yaml.name
 
 
+#: The localizer's transform_tolerance under --tf (AMCL's default).
+TF_TOLERANCE_S = 1.0
+
+
 def localizer_parameters(args: argparse.Namespace, map_yaml: Path) -> str:
     """The localizer's parameter file, as YAML: given to the node and kept in a recording."""
     import yaml
 
+    how = {"odometry_source": "tf", "use_sim_time": True, "autostart": False,
+           "transform_tolerance": TF_TOLERANCE_S} if args.tf else \
+        {"odometry_source": "topic", "autostart": True}
     return yaml.safe_dump({"/grid_localizer": {"ros__parameters": {
         "map_file": str(map_yaml), "resolution": args.resolution,
         "heading_bins": args.heading_bins, "max_states": 200_000_000,
         "laser_max_range": RANGE_MAX, "diagnostics_period": 0.5,
-        "max_odom_jump": args.max_odom_jump, "autostart": True,
-        "odometry_source": "topic"}}})
+        "max_odom_jump": args.max_odom_jump, **how}}})
 
 
 def draw(log, watcher: Watcher, map_yaml: Path, output: Path, name: str) -> None:
@@ -298,8 +361,16 @@ def pose_rows(poses: dict, truths: dict, truth_name: str) -> list[list[str]]:
     ]
 
 
-def summary(log, watcher: Watcher, rate: float, played_s: float, peak: float) -> list[list[str]]:
-    truth = {int(round(scan.t * 1e9)): scan.pose for scan in log.scans}
+def behind(pose: tuple[float, float, float], laser_ahead: float) -> tuple[float, float, float]:
+    """base_link's pose, ``laser_ahead`` m behind the laser's (as the import puts it)."""
+    from estimation_nodes.core.geometry import compose
+
+    return compose(pose, (-laser_ahead, 0.0, 0.0))
+
+
+def summary(log, watcher: Watcher, rate: float, played_s: float, peak: float,
+            laser_ahead: float) -> list[list[str]]:
+    truth = {int(round(scan.t * 1e9)): behind(scan.pose, laser_ahead) for scan in log.scans}
     d = watcher.diagnostics
     handled = int(d.get("handled.scan", 0))
     not_due = int(d.get("handled.scan_without_motion", 0))
@@ -315,6 +386,9 @@ def summary(log, watcher: Watcher, rate: float, played_s: float, peak: float) ->
          f"{d.get('update_ms_max', '?')} ms"],
         ["localizer peak RSS (VmHWM)", f"{peak:.0f} MiB"],
         *pose_rows(watcher.poses, truth, "corrected pose"),
+        *([] if not laser_ahead else [
+            [f"map -> base_link through /tf: {name}", value] for name, value in
+            pose_rows(watcher.through_tf(TF_TOLERANCE_S), truth, "corrected pose")]),
     ]
 
 
@@ -338,6 +412,9 @@ def main() -> None:
                              "keep them (default: a temporary folder)")
     parser.add_argument("--record", type=Path, metavar="FILE.mcap",
                         help="record the run and check it with estimation_replay")
+    parser.add_argument("--tf", action="store_true",
+                        help="as a robot with nav2_amcl: odometry and mount from tf, played "
+                             "with --clock, the lifecycle driven, map -> base_link scored")
     args = parser.parse_args()
     log_path = LOGS.get(args.log, Path(args.log))
     if not log_path.exists():

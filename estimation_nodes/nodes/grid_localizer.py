@@ -153,7 +153,7 @@ class GridLocalizer(LifecycleNode):
         self._pose_msg = PoseWithCovarianceStamped()
         self._tf_listener = TransformListener(self, self.tf_buffer,
                                               on_jump_back=self._on_time_jump_back,
-                                              on_transforms=self._use_waiting_scans) \
+                                              on_transforms=self._on_transforms) \
             if self._frames.odometry_from_tf else None
         self._tf_broadcaster = TransformBroadcaster(self) if self._frames.tf_broadcast else None
         subscribe, made = self.create_subscription, self._made
@@ -306,28 +306,41 @@ class GridLocalizer(LifecycleNode):
     def _use_waiting_scans(self) -> None:
         """The waiting scans whose odometry came, in order."""
         waiting = self._waiting_scans
-        while waiting and self.localization is not None and self._ready(*waiting[0][:2]):
+        while waiting and self.localization is not None:
+            ready, odometry = self._scan_odometry(*waiting[0][:2])
+            if not ready:
+                return
             msg, stamp, _ = waiting.popleft()
-            self._use_scan(msg, stamp)
+            self._use_scan(msg, stamp, odometry)
 
-    def _ready(self, msg: LaserScan, stamp: int) -> bool:
-        """Whether the odometry (and, from tf, the mount) of a scan's time is known; from
-        tf, the tree's odometry at that time is then followed."""
+    def _on_transforms(self, taken: list) -> None:
+        """From tf: each odom -> base_link sample followed as odometry (as the odom topic's
+        messages are), then the waiting scans looked at again."""
+        if self.localization is None or not self.active:
+            return
+        for parent, child, stamp, transform in taken:
+            if (parent, child) == (self._frames.odom_frame_id, self._frames.base_frame_id):
+                self._take_odometry(transform.as_planar(), stamp)
+        self._use_waiting_scans()
+
+    def _scan_odometry(self, msg: LaserScan, stamp: int
+                       ) -> tuple[bool, tuple[float, float, float] | None]:
+        """Whether the odometry of a scan's time is known, and from tf that odometry (the
+        tree's, interpolated at the scan's time) with the laser's mount taken."""
         assert self.localization is not None
         if not self._frames.odometry_from_tf:
-            return self.localization.odometry_covers(stamp)
+            return self.localization.odometry_covers(stamp), None
         frames = self._frames
         try:
             odom_base = self.tf_buffer.lookup(frames.odom_frame_id, frames.base_frame_id, stamp)
             mount = self._laser_mount(msg.header.frame_id, stamp)
         except Extrapolation:
-            return False      # the transforms of its time are still on their way
+            return False, None      # the transforms of its time are still on their way
         except LookupFailed as error:
             self._warnings.warn("tf_lookup", f"scan waits: {error}")
-            return False
+            return False, None
         self.localization.set_laser_pose(mount)
-        self._take_odometry(odom_base.as_planar(), stamp)
-        return True
+        return True, odom_base.as_planar()
 
     def _laser_mount(self, frame: str, stamp: int) -> tuple[float, float, float]:
         """The laser's (x, y, yaw) on the robot: the parameter, or the tree's (kept once
@@ -370,7 +383,9 @@ class GridLocalizer(LifecycleNode):
         if stamp is None and self._frames.odometry_from_tf:
             self._reject("unstamped_scan", "scan dropped: no stamp to look its transforms up at")
             return
-        if stamp is not None and (self._waiting_scans or not self._ready(msg, stamp)):
+        ready, odometry = (False, None) if stamp is None or self._waiting_scans \
+            else self._scan_odometry(msg, stamp)
+        if stamp is not None and not ready:
             # The odometry of the scan's time is still on its way (another topic): wait for
             # it, so the update does not depend on which came first; behind older scans
             # that wait, to keep their order.
@@ -380,11 +395,13 @@ class GridLocalizer(LifecycleNode):
             self._waiting_scans.append((msg, stamp, time.monotonic() + self._scan_wait_s()))
             self._use_waiting_scans()
             return
-        self._use_scan(msg, stamp)
+        self._use_scan(msg, stamp, odometry)
 
-    def _use_scan(self, msg: LaserScan, stamp: int | None) -> None:
+    def _use_scan(self, msg: LaserScan, stamp: int | None,
+                  odometry: tuple[float, float, float] | None = None) -> None:
+        """Update with a scan whose odometry is known (``odometry``: tf's at its time)."""
         assert self.localization is not None
-        if not (self.localization.due(stamp) or self._force_update):
+        if not (self.localization.due(stamp, odometry) or self._force_update):
             self.handled["scan_without_motion"] += 1
             self._broadcast(stamp)
             return
@@ -394,7 +411,7 @@ class GridLocalizer(LifecycleNode):
             self.rejected["nan_ranges"] += nan
         started = time.perf_counter()
         try:
-            self.localization.update(ranges, angles, stamp)
+            self.localization.update(ranges, angles, stamp, odometry)
         except errors.ZeroEvidenceError as error:
             self._reject("zero_evidence", f"scan dropped: {error}")
             return
@@ -406,17 +423,17 @@ class GridLocalizer(LifecycleNode):
         self.update_times.append(self.last_update_s)
         self.handled["scan"] += 1
         estimate = self._publish(Time.from_msg(msg.header.stamp))
-        self._map_odom = self._map_to_odom(estimate.pose, stamp)
+        self._map_odom = self._map_to_odom(estimate.pose, stamp, odometry)
         self._broadcast(stamp)
         # Busy: the whole answer to the scan, the estimate (its scan fit) and the publishing
         # included.
         self._busy_s += time.perf_counter() - started
 
-    def _map_to_odom(self, pose: tuple[float, float, float],
-                     stamp: int | None) -> Transform | None:
+    def _map_to_odom(self, pose: tuple[float, float, float], stamp: int | None,
+                     odometry: tuple[float, float, float] | None) -> Transform | None:
         """map -> odom such that map -> odom -> base_link at the scan's time is ``pose``."""
         assert self.localization is not None
-        odometry = self.localization.odometry_at(stamp)
+        odometry = odometry or self.localization.odometry_at(stamp)
         if odometry is None:
             return None
         return Transform.planar(*pose) * Transform.planar(*odometry).inverse()
@@ -561,6 +578,9 @@ class GridLocalizer(LifecycleNode):
                        "busy_percent": f"{100 * busy:.0f}"})
         values.update({f"handled.{k}": v for k, v in sorted(self.handled.items())})
         values.update({f"rejected.{k}": v for k, v in sorted(self.rejected.items())})
+        if self._tf_listener is not None:
+            values.update({f"tf_dropped.{k}": v
+                           for k, v in sorted(self._tf_listener.dropped.items())})
         problems = ["messages rejected"] if self.rejected else []
         missed_now = self.scan_gaps.missed - self._missed_reported
         self._missed_reported = self.scan_gaps.missed

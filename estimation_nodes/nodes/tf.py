@@ -61,14 +61,16 @@ class TransformListener:
 
     ``future_tolerance_ns``: a dynamic transform stamped further than this ahead of the
     node's clock is refused (None: no such check). ``on_jump_back`` is called after the
-    buffer was cleared for a clock that went back; ``on_transforms`` after each message
-    taken (a node waiting for a transform looks again).
+    buffer was cleared for a clock that went back; ``on_transforms`` after each message,
+    with the (parent, child, stamp, transform) of each transform the buffer took (a node
+    waiting for a transform looks again; one that follows an edge sees each sample).
     """
 
     def __init__(self, node: Node, buffer: TransformBuffer,
                  future_tolerance_ns: int | None = None,
                  on_jump_back: Callable[[], None] | None = None,
-                 on_transforms: Callable[[], None] | None = None,
+                 on_transforms: Callable[[list[tuple[str, str, int, Transform]]], None]
+                 | None = None,
                  tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
         self._node = node
         self.buffer = buffer
@@ -90,13 +92,15 @@ class TransformListener:
 
     def _take(self, msg: TFMessage, static: bool) -> None:
         now = None if self._future_ns is None else self._node.get_clock().now().nanoseconds
-        for transform in msg.transforms:
-            self.add(transform, static, now)
+        taken = [t for t in (self.add(transform, static, now) for transform in msg.transforms)
+                 if t is not None]
         if self._on_transforms is not None:
-            self._on_transforms()
+            self._on_transforms(taken)
 
-    def add(self, msg: TransformStamped, static: bool, now_ns: int | None = None) -> bool:
-        """One transform into the buffer; False (counted, warned) when it was refused."""
+    def add(self, msg: TransformStamped, static: bool, now_ns: int | None = None
+            ) -> tuple[str, str, int, Transform] | None:
+        """One transform into the buffer: what it took, or None (counted, warned) when it
+        was refused."""
         try:
             parent, child, stamp, transform = from_message(msg)
             self.buffer.set_transform(parent, child, stamp, transform, static, now_ns,
@@ -106,12 +110,11 @@ class TransformListener:
         except InvalidInputError as error:
             return self._refused(
                 "invalid", f"{msg.header.frame_id} -> {msg.child_frame_id}: {error}; dropped")
-        return True
+        return parent.lstrip("/"), child.lstrip("/"), stamp, transform
 
-    def _refused(self, reason: str, message: str) -> bool:
+    def _refused(self, reason: str, message: str) -> None:
         self.dropped[reason] += 1
         self._warnings.warn(f"tf {reason}", f"tf: {message}")
-        return False
 
     def _on_jump(self, jump) -> None:
         if jump.clock_change not in (ClockChange.ROS_TIME_NO_CHANGE,

@@ -207,6 +207,11 @@ class GridLocalization:
         stamp_ns = check_integer("stamp_ns", stamp_ns)
         return bool(self._history) and self._history[-1][0] >= stamp_ns
 
+    def _pose_for(self, stamp_ns: int | None, odometry: Pose | None) -> Pose | None:
+        if odometry is not None:
+            return grid.check_pose("odometry", odometry)
+        return self._odometry_at(_stamp(stamp_ns))
+
     def odometry_at(self, stamp_ns: int | None) -> Pose | None:
         """The odometry pose an update at ``stamp_ns`` predicts to (None: none yet)."""
         return self._odometry_at(_stamp(stamp_ns))
@@ -229,10 +234,12 @@ class GridLocalization:
         index = bisect_right([stamp for stamp, _ in self._history], stamp_ns)
         return self._history[index - 1][1] if index else None
 
-    def due(self, stamp_ns: int | None = None) -> bool:
+    def due(self, stamp_ns: int | None = None, odometry: Pose | None = None) -> bool:
         """Whether a scan taken at ``stamp_ns`` updates the filter: the first once odometry
-        is there, later ones after enough motion since the last update."""
-        pose = self._odometry_at(_stamp(stamp_ns))
+        is there, later ones after enough motion since the last update. ``odometry``: the
+        odometry pose at the scan's time where the caller knows it (tf's, interpolated),
+        else the latest followed at or before it."""
+        pose = self._pose_for(stamp_ns, odometry)
         if pose is None:
             return False
         if self._reference is None:
@@ -243,12 +250,12 @@ class GridLocalization:
         return math.hypot(dx, dy) >= self._min_d or turned >= self._min_a
 
     def update(self, ranges: FloatArray, angles: FloatArray,
-               stamp_ns: int | None = None) -> None:
-        """Predict with the odometry from the last update to the scan's time, correct with
-        the scan: the beams to score, without the readings of no return (see
-        ``steps.check_scan``: a NaN, infinite or negative range is refused)."""
+               stamp_ns: int | None = None, odometry: Pose | None = None) -> None:
+        """Predict with the odometry from the last update to the scan's time (``odometry``
+        as in ``due``), correct with the scan: the beams to score, without the readings of
+        no return (see ``steps.check_scan``: a NaN, infinite or negative range is refused)."""
         ranges, angles = grid.check_scan(ranges, angles)
-        pose = self._odometry_at(_stamp(stamp_ns))
+        pose = self._pose_for(stamp_ns, odometry)
         if pose is None:
             raise InvalidInputError(
                 "stamp_ns: no odometry yet: the motion since the last update is unknown")

@@ -2,17 +2,20 @@
 writes, so that estimation_play, estimation_replay, ros2 bag and Foxglove read it.
 
     estimation_import carmen LOG -o run.mcap [--range-max M] [--scan-rate HZ]
+                             [--laser-ahead M]
     estimation_import utias DATASET_DIR --robot N -o run.mcap [--landmarks-file FILE]
 
 CARMEN (FLASER or ROBOTLASER1 scans): /scan (sensor_msgs/LaserScan with the log's
 angles, range_max and remissions as intensities, frame ``laser``), /odom
 (nav_msgs/Odometry at every odometry line: the raw odometry pose and twist, ``odom`` ->
 ``base_link``; from the scan lines' odometry fields in a log without ODOM lines),
-/ground_truth (geometry_msgs/PoseStamped in ``map``: the log's
-corrected pose at each scan; none for a raw log, see ``carmen``). UTIAS: /odom (the
-twist, and the pose it dead-reckons), /landmark_observations (sensor_msgs/PointCloud2,
-one per camera frame: x = range cos(bearing), y = range sin(bearing), z = 0, id = the
-landmark's subject number), /ground_truth (Vicon), and a landmarks file (YAML).
+the tf tree a robot records (/tf: ``odom`` -> ``base_link`` at every odometry line;
+/tf_static: ``base_link`` -> ``laser``, ``--laser-ahead`` m forward), /ground_truth
+(geometry_msgs/PoseStamped in ``map``: the log's corrected pose at each scan; none for a
+raw log, see ``carmen``). UTIAS: /odom (the twist, and the pose it dead-reckons),
+/landmark_observations (sensor_msgs/PointCloud2, one per camera frame: x = range
+cos(bearing), y = range sin(bearing), z = 0, id = the landmark's subject number),
+/ground_truth (Vicon), and a landmarks file (YAML).
 Every message is stamped with the log's time (CARMEN: with ``--scan-rate``, the scans at
 that rate in the log's order and the odometry evenly between them, for a log whose times
 do not advance). What was left out is counted and reported; a log that cannot be read is
@@ -39,6 +42,7 @@ from estimation_nodes.tools.recording.mcap import McapRunWriter, RecordingError
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 ODOMETRY = "nav_msgs/msg/Odometry"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 POINT_CLOUD = "sensor_msgs/msg/PointCloud2"
 
 
@@ -73,10 +77,24 @@ class _Writer:
 
 
 def import_carmen(log_path: Path, out: Path, range_max: float | None,
-                  scan_rate: float | None = None) -> list[str]:
+                  scan_rate: float | None = None, laser_ahead: float = 0.0) -> list[str]:
+    """The log as a recording: /scan, /odom, the tf tree (/tf: odom -> base_link at every
+    odometry line, /tf_static: base_link -> laser) and, for a corrected log,
+    /ground_truth. With ``laser_ahead`` the robot's frame is put that far (m) behind the
+    laser, as on a robot whose laser is mounted forward: the odometry and the truth are
+    then base_link's, the scans stay the laser's."""
     from geometry_msgs.msg import PoseStamped
     from nav_msgs.msg import Odometry
     from sensor_msgs.msg import LaserScan
+    from tf2_msgs.msg import TFMessage
+
+    from estimation_nodes.core.geometry import compose
+    from estimation_nodes.core.transforms.rigid import Transform
+    from estimation_nodes.nodes.tf import to_message
+
+    def base_of(pose):
+        """base_link's pose, given the laser's (the log's poses are the laser's)."""
+        return compose(pose, (-laser_ahead, 0.0, 0.0))
 
     log = carmen.read_log(log_path, scan_rate)
     limit, origin = log.max_reading, "the log's largest reading"
@@ -84,10 +102,15 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None,
         limit, origin = range_max, "given"
     elif log.laser_range_max is not None and log.laser_range_max <= limit:
         limit, origin = log.laser_range_max, "the laser's maximum_range"
-    topics = {"/scan": LASER_SCAN, "/odom": ODOMETRY}
+    topics = {"/scan": LASER_SCAN, "/odom": ODOMETRY, "/tf": TF_MESSAGE,
+              "/tf_static": TF_MESSAGE}
     if log.corrected:
         topics["/ground_truth"] = POSE_STAMPED
     writer = _Writer(out, topics, str(log_path))
+    first = min([scan.t for scan in log.scans] + [sample.t for sample in log.odometry])
+    mount = to_message("base_link", "laser", seconds_to_ns(first),
+                       Transform.planar(laser_ahead, 0.0, 0.0))
+    writer.add("/tf_static", first, TFMessage(transforms=[mount]))
     for scan in log.scans:
         n = scan.ranges.size
         msg = LaserScan()
@@ -102,17 +125,23 @@ def import_carmen(log_path: Path, out: Path, range_max: float | None,
             continue
         truth = PoseStamped()
         _stamp(truth.header, scan.t, "map")
-        fill_pose(truth.pose, *scan.pose)
+        fill_pose(truth.pose, *base_of(scan.pose))
         writer.add("/ground_truth", scan.t, truth)
     for sample in log.odometry:
+        pose = base_of(sample.pose)
         odom = Odometry()
         _stamp(odom.header, sample.t, "odom")
         odom.child_frame_id = "base_link"
-        fill_pose(odom.pose.pose, *sample.pose)
+        fill_pose(odom.pose.pose, *pose)
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = sample.tv, sample.rv
         writer.add("/odom", sample.t, odom)
+        writer.add("/tf", sample.t, TFMessage(transforms=[to_message(
+            "odom", "base_link", seconds_to_ns(sample.t), Transform.planar(*pose))]))
     writer.close()
     notes = [f"range_max {limit:g} m ({origin})"]
+    if laser_ahead:
+        notes.append(f"base_link {laser_ahead:g} m behind the laser (--laser-ahead): "
+                     f"/odom, /tf and /ground_truth are base_link's, the scans the laser's")
     if scan_rate is not None:
         notes.append(f"times placed at {scan_rate:g} Hz from {log.scans[0].t:.3f} s "
                      f"(--scan-rate): the scans in the log's order, the odometry evenly "
@@ -202,6 +231,10 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                    help="place the scans at this rate in the log's order, from the first "
                         "scan's time, and the odometry evenly between them: for a log "
                         "whose times do not advance (printed with too few digits)")
+    c.add_argument("--laser-ahead", type=float, default=0.0, metavar="M",
+                   help="the laser this far ahead of base_link (/tf_static base_link -> "
+                        "laser): the robot's frame, its odometry and its truth are put that "
+                        "far behind the laser's poses the log gives (default: 0)")
     u = kinds.add_parser("utias", help="one robot of a UTIAS MRCLAM dataset folder")
     u.add_argument("dataset", type=Path)
     u.add_argument("--robot", type=int, required=True)
@@ -213,6 +246,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     if args.kind == "carmen" and args.range_max is not None \
             and not (math.isfinite(args.range_max) and args.range_max > 0):
         parser.error("--range-max must be a finite number > 0")
+    if args.kind == "carmen" and not math.isfinite(args.laser_ahead):
+        parser.error("--laser-ahead must be a finite number")
     if args.kind == "carmen" and args.scan_rate is not None \
             and not (math.isfinite(args.scan_rate) and args.scan_rate > 0):
         parser.error("--scan-rate must be a finite number > 0")
@@ -223,7 +258,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = parse_args(argv)
     try:
         if args.kind == "carmen":
-            lines = import_carmen(args.log, args.output, args.range_max, args.scan_rate)
+            lines = import_carmen(args.log, args.output, args.range_max, args.scan_rate,
+                                  args.laser_ahead)
         else:
             lines = import_utias(args.dataset, args.robot, args.output, args.landmarks_file)
     except (carmen.LogError, utias.DatasetError, RecordingError) as error:

@@ -248,7 +248,8 @@ def replay_records(records: list[Recorded], values: dict, tolerance: float) -> G
     def update(scan, stamp_ns: int) -> None:
         ranges, angles, _ = scan_beams(scan, settings.sensor.max_range, settings.max_beams)
         assert localization is not None
-        localization.update(ranges, angles, stamp_ns)
+        localization.update(ranges, angles, stamp_ns,
+                            inputs.odometry_of(scan, stamp_ns, localization))
 
     for step in steps:
         assumed = None
@@ -271,7 +272,8 @@ def replay_records(records: list[Recorded], values: dict, tolerance: float) -> G
             elif step.kind == "update":
                 if assumed is None:
                     comparison.left_out += inputs.advance_to(step.stamp_ns, localization)
-                if not localization.due(step.stamp_ns):
+                if not localization.due(step.stamp_ns, inputs.odometry_of(
+                        step.scan, step.stamp_ns, localization)):
                     alone.differences.append(
                         f"{_at(step)}: the localizer updated with this scan, which its "
                         f"update rule does not take (is odometry of its time missing?)")
@@ -310,18 +312,19 @@ def replay_records(records: list[Recorded], values: dict, tolerance: float) -> G
 
 class _InputsInStampOrder:
     """The recorded odometry and scans by their stamps, fed to the offline localizer up to
-    each scan it updates with. With odometry from tf, each scan's odometry is the recorded
-    tree's odom -> base_link at its time (and its mount the tree's), as the node takes it."""
+    each scan it updates with. With odometry from tf, the odometry is every recorded
+    odom -> base_link sample the node's buffer takes, and each scan's own odometry and
+    mount are the recorded tree's at its time, as the node takes them."""
 
     def __init__(self, records: list[Recorded], frames: GridFrames) -> None:
-        scans = [(header_stamp_ns(r.msg), 1, r.msg) for r in records if r.topic == SCAN]
         self._frames = frames
-        self._tree = _recorded_tree(records) if frames.odometry_from_tf else None
-        if self._tree is None:
-            events = [(header_stamp_ns(r.msg), 0, r.msg) for r in records if r.topic == ODOM]
+        if frames.odometry_from_tf:
+            self._tree, samples = _recorded_tree(records, frames)
+            events = [(stamp, 0, pose) for stamp, pose in samples]
         else:
-            events = [(stamp, 0, _TreeAt(scan)) for stamp, _, scan in scans]
-        events += scans
+            self._tree = None
+            events = [(header_stamp_ns(r.msg), 0, r.msg) for r in records if r.topic == ODOM]
+        events += [(header_stamp_ns(r.msg), 1, r.msg) for r in records if r.topic == SCAN]
         events.sort(key=lambda event: event[:2])
         self._events = events
         self._next = 0
@@ -337,9 +340,12 @@ class _InputsInStampOrder:
             stamp, rank, msg = events[self._next]
             self._next += 1
             if rank == 0:
-                self._odometry(msg, stamp, localization)
+                pose = msg if isinstance(msg, tuple) else planar_pose(msg.pose.pose)
+                if finite_pose(pose):             # the localizer drops the others
+                    localization.on_odometry(pose, stamp or None)
             # Before the first update the localizer may not have been there yet.
-            elif (take is not None or localization.updates) and localization.due(stamp):
+            elif (take is not None or localization.updates) \
+                    and localization.due(stamp, self.odometry_of(msg, stamp, localization)):
                 due += 1
                 if take is not None:
                     take(msg, stamp)
@@ -348,47 +354,45 @@ class _InputsInStampOrder:
             self._next += 1
         return due
 
-    def _odometry(self, msg: Any, stamp: int, localization: GridLocalization) -> None:
-        if not isinstance(msg, _TreeAt):
-            pose = planar_pose(msg.pose.pose)
-            if finite_pose(pose):             # the localizer drops the others
-                localization.on_odometry(pose, stamp or None)
-            return
-        assert self._tree is not None
+    def odometry_of(self, scan: Any, stamp: int, localization: GridLocalization
+                    ) -> tuple[float, float, float] | None:
+        """With odometry from tf, the tree's at the scan's time (its mount taken); None
+        otherwise, or where the tree cannot say (the localizer dropped that scan)."""
+        if self._tree is None:
+            return None
         frames = self._frames
-        scan_frame = msg.scan.header.frame_id
+        frame = scan.header.frame_id
         try:
             odom_base = self._tree.lookup(frames.odom_frame_id, frames.base_frame_id, stamp)
-            mount = frames.laser_pose or ((0.0, 0.0, 0.0)
-                                          if scan_frame in ("", frames.base_frame_id) else
-                                          self._tree.lookup(frames.base_frame_id, scan_frame,
-                                                            stamp).as_planar())
+            mount = frames.laser_pose or (
+                (0.0, 0.0, 0.0) if frame in ("", frames.base_frame_id)
+                else self._tree.lookup(frames.base_frame_id, frame, stamp).as_planar())
         except LookupFailed:
-            return                            # the localizer dropped this scan too
+            return None
         localization.set_laser_pose(mount)
-        localization.on_odometry(odom_base.as_planar(), stamp)
+        return odom_base.as_planar()
 
 
-@dataclass(frozen=True)
-class _TreeAt:
-    """The tree's odometry at a scan's time (an event of the replay)."""
-
-    scan: Any
-
-
-def _recorded_tree(records: list[Recorded]) -> TransformBuffer:
-    """Every recorded /tf and /tf_static transform, kept for the whole run; those the
-    localizer's buffer refuses are refused here too."""
+def _recorded_tree(records: list[Recorded], frames: GridFrames
+                   ) -> tuple[TransformBuffer, list[tuple[int, tuple[float, float, float]]]]:
+    """Every recorded /tf and /tf_static transform, kept for the whole run (those the
+    localizer's buffer refuses refused here too), and the odom -> base_link samples taken,
+    in order."""
     tree = TransformBuffer(cache_time_ns=1 << 62)
+    samples = []
     for record in records:
         if record.topic not in (TF, TF_STATIC):
             continue
         for transform in record.msg.transforms:
             try:
-                tree.set_transform(*from_message(transform), static=record.topic == TF_STATIC)
+                parent, child, stamp, taken = from_message(transform)
+                tree.set_transform(parent, child, stamp, taken,
+                                   static=record.topic == TF_STATIC)
             except errors.EstimationError:
                 continue
-    return tree
+            if (parent, child) == (frames.odom_frame_id, frames.base_frame_id):
+                samples.append((stamp, taken.as_planar()))
+    return tree, samples
 
 
 def _model(settings: GridLocalizerSettings, maps: tuple, records: list[Recorded]):
