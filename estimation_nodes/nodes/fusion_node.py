@@ -33,7 +33,6 @@ from sensor_msgs.msg import Imu
 
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
-from estimation_nodes.core.fusion.sensors import SensorInputs
 from estimation_nodes.core.fusion.state import quaternion_from_rpy, rotation_from_quaternion
 from estimation_nodes.core.transforms.buffer import LookupFailed, TransformBuffer
 from estimation_nodes.core.transforms.rigid import Transform
@@ -79,8 +78,7 @@ class FusionNode(Node):
             self.get_logger().warning(f"parameter {name} is not supported yet: ignored")
         self._fusion = FusionFilter(self._config.settings)
         self._given_mounts = mounts
-        self._inputs = SensorInputs(dict(self._config.sensors), dict(mounts),
-                                    self._config.base_link_frame, self._config.gravity)
+        self._inputs = self._config.sensor_inputs(mounts)
         self.dropped_non_finite = 0
         self.resets = 0
         self._last_published_ns = -1
@@ -134,8 +132,7 @@ class FusionNode(Node):
     def _on_time_jump_back(self) -> None:
         """A clock that went back (a bag played again): start over, as the peer does."""
         self._fusion.reset()
-        self._inputs = SensorInputs(dict(self._config.sensors), dict(self._given_mounts),
-                                    self._config.base_link_frame, self._config.gravity)
+        self._inputs = self._config.sensor_inputs(self._given_mounts)
         self._last_published_ns = -1
         self.resets += 1
         self.get_logger().warning("time jumped back: the filter was reset")

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from estimation_nodes.core.fusion.filter import FusionSettings
-from estimation_nodes.core.fusion.sensors import SensorConfig
+from estimation_nodes.core.fusion.inputs import Mount
+from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
 from estimation_nodes.core.fusion.state import STATE_SIZE
 from estimation_nodes.core.fusion.steps import UnscentedWeights
 
@@ -56,7 +57,13 @@ class FusionConfig:
     #: ``transform_time_offset``, s).
     transform_time_offset_ns: int = 0
     gravity: float = 9.80665
+    two_d_mode: bool = False
     unsupported: tuple[str, ...] = field(default_factory=tuple)
+
+    def sensor_inputs(self, mounts: dict[str, Mount] | None = None) -> SensorInputs:
+        """The inputs of this configuration, with the mounts known so far by frame."""
+        return SensorInputs(dict(self.sensors), dict(mounts or {}), self.base_link_frame,
+                            self.gravity, two_d=self.two_d_mode)
 
 
 def _matrix(params: dict[str, Any], name: str, default: np.ndarray) -> np.ndarray:
@@ -126,8 +133,6 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
         raise FusionConfigError("frequency: expected a positive rate in Hz")
     timeout = float(params.get("sensor_timeout", 1.0 / frequency))
     sensors, unsupported = _sensors(params)
-    if params.get("two_d_mode", False):
-        unsupported.append("two_d_mode")
     unsupported += sorted(name for name in params
                           if name not in SUPPORTED | HARMLESS
                           and not _is_sensor_parameter(name, sensors))
@@ -157,6 +162,7 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
         publish_tf=bool(params.get("publish_tf", True)),
         transform_time_offset_ns=_offset_ns(params),
         gravity=float(params.get("gravitational_acceleration", 9.80665)),
+        two_d_mode=bool(params.get("two_d_mode", False)),
         unsupported=tuple(unsupported))
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -124,3 +125,111 @@ def test_the_config_reads_the_peers_names_and_says_what_it_does_not_support():
         fusion_config({"process_noise_covariance": [1.0, 2.0]})
     with pytest.raises(FusionConfigError, match="frequency"):
         fusion_config({"frequency": 0})
+
+
+# --- two_d_mode -------------------------------------------------------------------------
+
+def vector3(values) -> SimpleNamespace:
+    return SimpleNamespace(x=values[0], y=values[1], z=values[2])
+
+
+def header(stamp_ns: int, frame: str) -> SimpleNamespace:
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    return SimpleNamespace(stamp=SimpleNamespace(sec=sec, nanosec=nanosec), frame_id=frame)
+
+
+def odometry_message(stamp_ns: int, linear=(0.0, 0.0, 0.0), angular=(0.0, 0.0, 0.0),
+                     twist_covariance=None, position=(0.0, 0.0, 0.0),
+                     quaternion=(0.0, 0.0, 0.0, 1.0), pose_covariance=None,
+                     frame: str = "odom", child: str = "base_link") -> SimpleNamespace:
+    """A nav_msgs/Odometry by its field names, as SensorInputs reads one."""
+    twist_covariance = np.eye(6) * 0.01 if twist_covariance is None else twist_covariance
+    pose_covariance = np.eye(6) * 0.01 if pose_covariance is None else pose_covariance
+    orientation = SimpleNamespace(x=quaternion[0], y=quaternion[1], z=quaternion[2],
+                                  w=quaternion[3])
+    return SimpleNamespace(
+        header=header(stamp_ns, frame), child_frame_id=child,
+        pose=SimpleNamespace(pose=SimpleNamespace(position=vector3(position),
+                                                  orientation=orientation),
+                             covariance=list(np.ravel(pose_covariance))),
+        twist=SimpleNamespace(twist=SimpleNamespace(linear=vector3(linear),
+                                                    angular=vector3(angular)),
+                              covariance=list(np.ravel(twist_covariance))))
+
+
+def kalman_correction(x, p, z, r, idx):
+    """The textbook correction with H the rows ``idx`` of the identity, angles wrapped."""
+    h = np.eye(15)[idx]
+    k = p @ h.T @ np.linalg.inv(h @ p @ h.T + r)
+    innovation = z - h @ x
+    for row, index in enumerate(idx):
+        if index in state.ANGLES:
+            innovation[row] = state.wrap(innovation[row])
+    gain_residual = np.eye(15) - k @ h
+    return (state.wrap_state_angles(x + k @ innovation),
+            gain_residual @ p @ gain_residual.T + k @ r @ k.T)
+
+
+TWIST_AND_YAW_RATE = tuple(i in (state.VX, state.VY, state.VYAW) for i in range(15))
+PLANAR = [state.Z, state.ROLL, state.PITCH, state.VZ, state.VROLL, state.VPITCH, state.AZ]
+
+
+def test_two_d_mode_measures_the_planar_zeros_with_the_peers_variance():
+    z = RNG.normal(size=15)
+    a = RNG.normal(size=(15, 15))
+    covariance = a @ a.T
+    measured = inputs.force_two_d(Measurement(5, z, covariance, (6, 7, 8, 11), 4.0, "odom0"))
+    assert measured.indices == (2, 3, 4, 6, 7, 8, 9, 10, 11, 14)
+    expected_z = z.copy()
+    expected_z[PLANAR] = 0.0
+    np.testing.assert_array_equal(measured.z, expected_z)
+    kept = [6, 7, 11]
+    np.testing.assert_array_equal(measured.covariance[np.ix_(kept, kept)],
+                                  covariance[np.ix_(kept, kept)])
+    np.testing.assert_array_equal(measured.covariance[np.ix_(PLANAR, PLANAR)],
+                                  np.eye(7) * 1e-6)
+    # The zeros are not correlated with what the sensor measured.
+    assert not measured.covariance[np.ix_(PLANAR, kept)].any()
+    assert (measured.stamp_ns, measured.threshold, measured.source) == (5, 4.0, "odom0")
+
+
+def test_a_two_d_correction_is_the_kalman_correction_with_the_zeros_measured():
+    x = random_state()
+    a = RNG.normal(size=(15, 15))
+    p = a @ a.T + np.eye(15)
+    z = np.zeros(15)
+    z[[state.VX, state.VY, state.VYAW]] = [1.2, -0.1, 0.3]
+    covariance = np.diag(np.full(15, 0.04))
+    forced = inputs.force_two_d(Measurement(0, z, covariance, (6, 7, 11)))
+    x_new, p_new = steps.ekf_correct(x, p, forced)
+    idx = sorted([6, 7, 11] + PLANAR)
+    r = np.diag([1e-6 if i in PLANAR else 0.04 for i in idx])
+    x_expected, p_expected = kalman_correction(x, p, z[idx], r, idx)
+    np.testing.assert_allclose(x_new, x_expected, atol=1e-9)
+    np.testing.assert_allclose(p_new, p_expected, atol=1e-9)
+
+
+@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+def test_a_two_d_robots_file_keeps_the_estimate_in_the_plane(kind):
+    """Odometry that says the robot climbs (vz) and rolls: in two_d_mode the state keeps
+    z, roll and pitch at 0; without it, the climb is fused."""
+    finals = {}
+    for two_d in (False, True):
+        config = fusion_config({"odom0": "odom", "two_d_mode": two_d, "filter_type": kind,
+                                "odom0_config": [False] * 6 + [True] * 6 + [False] * 3})
+        assert "two_d_mode" not in config.unsupported
+        fusion = FusionFilter(config.settings)
+        sensor_inputs = config.sensor_inputs()
+        for k in range(100):
+            stamp = k * 20_000_000
+            sensor_inputs.add(config.sensors["odom0"],
+                              odometry_message(stamp, (1.0, 0.0, 0.5), (0.2, 0.0, 0.1)), fusion)
+            fusion.update(stamp)
+        finals[two_d] = fusion.x.copy()
+    assert finals[False][state.Z] > 0.5
+    np.testing.assert_allclose(finals[True][PLANAR], 0.0, atol=1e-3)
+    # The planar motion goes on: 1 m/s turning at 0.1 rad/s for 1.98 s (the UKF lags by a
+    # few percent, as in test_both_filters_follow_a_constant_velocity).
+    assert finals[True][state.YAW] == pytest.approx(0.198, abs=0.01)
+    assert np.hypot(finals[True][state.X], finals[True][state.Y]) == pytest.approx(1.98,
+                                                                                   rel=0.05)

@@ -14,23 +14,29 @@ that the mount turns into another one measures that one.
   omega. (The peer's ROS 2 branch takes gravity off after the rotation into the
   robot's frame, with the sensor's attitude: for a sensor mounted turned, as the Husky's,
   that mixes frames; its bag tests' expected poses agree with the order here.)
+- ``force_two_d``: ``two_d_mode``'s constraint added to any of them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from estimation_nodes.core.fusion.state import (
-    ACCELERATION, AX, POSE, ROLL, STATE_SIZE, TWIST, VROLL, VX, rotation_from_quaternion,
-    rotation_from_rpy, rpy_from_rotation, wrap)
+    ACCELERATION, AX, AZ, PITCH, POSE, ROLL, STATE_SIZE, TWIST, VPITCH, VROLL, VX, VZ, Z,
+    rotation_from_quaternion, rotation_from_rpy, rpy_from_rotation, wrap)
 from estimation_nodes.core.fusion.steps import Measurement
 from estimation_nodes.core.validation import FloatArray
 
 #: Standard gravity (m/s^2), robot_localization's default ``gravitational_acceleration``.
 GRAVITY = 9.80665
+#: What ``two_d_mode`` holds at zero: z, roll, pitch, their rates and the vertical acceleration.
+PLANAR_ZEROS = (Z, ROLL, PITCH, VZ, VROLL, VPITCH, AZ)
+#: The variance the peer gives those zeros.
+PLANAR_VARIANCE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -138,6 +144,25 @@ def acceleration(stamp_ns: int, linear: FloatArray, covariance3: FloatArray,
     mask = list(update)
     mask[AX:AX + 3] = _masked(r, tuple(update[AX:AX + 3]))
     return _measurement(stamp_ns, z, covariance, _only(mask, ACCELERATION), threshold, source)
+
+
+def force_two_d(measurement: Measurement) -> Measurement:
+    """The measurement saying also that z, roll, pitch, vz, vroll, vpitch and az are 0, with
+    variance 1e-6, whatever the sensor said of them (the peer's ``forceTwoD``, which
+    ``two_d_mode`` applies to every measurement, so the state stays in the plane).
+
+    Their cross terms with the other entries are zeroed. The peer keeps the message's,
+    which belong to the values replaced and can leave R indefinite.
+    """
+    zeros = list(PLANAR_ZEROS)
+    z = measurement.z.copy()
+    z[zeros] = 0.0
+    covariance = measurement.covariance.copy()
+    covariance[zeros, :] = 0.0
+    covariance[:, zeros] = 0.0
+    covariance[zeros, zeros] = PLANAR_VARIANCE
+    indices = tuple(sorted(set(measurement.indices) | set(PLANAR_ZEROS)))
+    return dataclasses.replace(measurement, z=z, covariance=covariance, indices=indices)
 
 
 def _only(mask: list[bool], part: slice) -> list[bool]:

@@ -52,6 +52,8 @@ class SensorInputs:
     mounts: dict[str, Mount] = field(default_factory=dict)
     base_frame: str = "base_link"
     gravity: float = inputs.GRAVITY
+    #: ``two_d_mode``: every measurement also holds z, roll, pitch and their rates at 0.
+    two_d: bool = False
     dropped: dict[str, int] = field(default_factory=dict)
     _last: dict[str, int] = field(default_factory=dict)
 
@@ -76,6 +78,8 @@ class SensorInputs:
             made = self._imu(sensor, msg, fusion)
         else:
             made = self._odometry(sensor, msg, fusion)
+        if self.two_d:
+            made = [inputs.force_two_d(measurement) for measurement in made]
         for measurement in made:
             fusion.enqueue(measurement)
         return len(made)
