@@ -4,13 +4,15 @@ they are, over the package's fusion core.
 Every parameter the file gives is taken (the node declares them from the overrides, as
 the peer's inputs odom0, odom1, ... are open-ended) and read with the peer's names and
 meanings (params/fusion.py); one the core does not act on yet is one warning line naming
-it. The inputs ``odomN`` (nav_msgs/Odometry), ``twistN``
+it. The inputs ``odomN`` (nav_msgs/Odometry), ``poseN``
+(geometry_msgs/PoseWithCovarianceStamped), ``twistN``
 (geometry_msgs/TwistWithCovarianceStamped) and ``imuN`` (sensor_msgs/Imu) are queued as
 they come; a timer at ``frequency`` on the node's clock (``/clock`` with
 ``use_sim_time``) runs the periodic update and publishes ``odometry/filtered``. A sensor
-frame other than ``base_link_frame`` needs its mount: ``sensor_mounts`` (this package's
-parameter, ["FRAME=x,y,z,roll,pitch,yaw", ...]) gives it, else the transform tree
-(``/tf_static``, ``/tf``: nodes/tf.py) at the message's time. With ``publish_tf`` the
+frame other than ``base_link_frame`` needs its mount, and a pose's frame other than
+``world_frame`` its place in the world: ``sensor_mounts`` (this package's parameter,
+["FRAME=x,y,z,roll,pitch,yaw", ...]) gives them, else the transform tree (``/tf_static``,
+``/tf``: nodes/tf.py) at the message's time. With ``publish_tf`` the
 estimate goes on ``/tf`` too: ``odom -> base_link`` when ``world_frame`` is the odom
 frame, ``map -> odom`` (through the tree's ``odom -> base_link`` at the estimate's time)
 when it is the map frame, stamped with the estimate's time plus
@@ -26,13 +28,14 @@ from collections.abc import Sequence
 
 import numpy as np
 from nav_msgs.msg import Odometry
-from geometry_msgs.msg import TwistWithCovarianceStamped
+from geometry_msgs.msg import PoseWithCovarianceStamped, TwistWithCovarianceStamped
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Imu
 
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
+from estimation_nodes.core.fusion.sensors import SensorConfig
 from estimation_nodes.core.fusion.state import quaternion_from_rpy, rotation_from_quaternion
 from estimation_nodes.core.transforms.buffer import LookupFailed, TransformBuffer
 from estimation_nodes.core.transforms.rigid import Transform
@@ -41,13 +44,15 @@ from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.tf import TransformBroadcaster, TransformListener, to_message
 from estimation_nodes.params.fusion import FusionConfigError, fusion_config
 
-MESSAGE_TYPES = {"odom": Odometry, "twist": TwistWithCovarianceStamped, "imu": Imu}
+MESSAGE_TYPES = {"odom": Odometry, "pose": PoseWithCovarianceStamped,
+                 "twist": TwistWithCovarianceStamped, "imu": Imu}
 #: This package's own parameters (beyond robot_localization's).
 SENSOR_MOUNTS = "sensor_mounts"
 
 
 def parse_mounts(entries: Sequence[str]) -> dict[str, Mount]:
-    """``FRAME=x,y,z,roll,pitch,yaw`` entries (m, rad) as mounts by frame."""
+    """``FRAME=x,y,z,roll,pitch,yaw`` entries (m, rad) as mounts by frame: a sensor frame's
+    pose on the robot, or a pose input's frame's pose in the world frame."""
     mounts = {}
     for entry in entries:
         frame, _, numbers = entry.partition("=")
@@ -97,30 +102,30 @@ class FusionNode(Node):
                          reliability=qos_profile_sensor_data.reliability)
 
         def on_message(msg) -> None:
-            if not _finite(msg):
+            if not _finite(msg, sensor):
                 self.dropped_non_finite += 1
                 self.get_logger().warning(
                     f"{sensor.name} ({sensor.topic}): a non-finite value: message dropped",
                     throttle_duration_sec=5.0)
                 return
-            self._mount_from_tf(msg.child_frame_id if sensor.kind == "odom"
-                                else msg.header.frame_id, msg.header.stamp)
+            for parent, frame in self._inputs.frames(sensor, msg):
+                self._mount_from_tf(parent, frame, msg.header.stamp)
             self._inputs.add(sensor, msg, self._fusion)
 
         return self.create_subscription(MESSAGE_TYPES[sensor.kind], sensor.topic,
                                         on_message, qos)
 
-    def _mount_from_tf(self, frame: str, stamp) -> None:
-        """The sensor frame's mount from the tree, unless ``sensor_mounts`` gives it; left
-        unknown (the message is then dropped and counted) when the tree cannot say."""
-        if frame in ("", self._config.base_link_frame) or frame in self._given_mounts:
+    def _mount_from_tf(self, parent: str, frame: str, stamp) -> None:
+        """``frame``'s mount in ``parent`` from the tree, unless ``sensor_mounts`` gives it;
+        left unknown (the message is then dropped and counted) when the tree cannot say."""
+        if frame in ("", parent) or frame in self._given_mounts:
             return
         time_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         try:
             try:
-                t = self.tf_buffer.lookup(self._config.base_link_frame, frame, time_ns)
+                t = self.tf_buffer.lookup(parent, frame, time_ns)
             except LookupFailed:
-                t = self.tf_buffer.lookup(self._config.base_link_frame, frame)
+                t = self.tf_buffer.lookup(parent, frame)
         except LookupFailed as error:
             self._inputs.mounts.pop(frame, None)
             self.get_logger().warning(f"no mount for {frame!r}: {error}",
@@ -194,7 +199,7 @@ class FusionNode(Node):
         return msg
 
 
-def _finite(msg) -> bool:
+def _finite(msg, sensor: SensorConfig) -> bool:
     """Whether every number the fusion may read of ``msg`` is finite."""
     if isinstance(msg, Imu):
         values = [msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w,
@@ -202,10 +207,15 @@ def _finite(msg) -> bool:
                   msg.linear_acceleration.x, msg.linear_acceleration.y,
                   msg.linear_acceleration.z, *msg.orientation_covariance,
                   *msg.angular_velocity_covariance, *msg.linear_acceleration_covariance]
-    else:
+        return all(math.isfinite(v) for v in values)
+    values = []
+    if sensor.measures_pose:
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        values += [p.x, p.y, p.z, q.x, q.y, q.z, q.w, *msg.pose.covariance]
+    if sensor.measures_twist:
         t = msg.twist.twist
-        values = [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z,
-                  *msg.twist.covariance]
+        values += [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z,
+                   *msg.twist.covariance]
     return all(math.isfinite(v) for v in values)
 
 

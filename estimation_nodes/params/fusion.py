@@ -30,12 +30,18 @@ SUPPORTED = {
 }
 #: Parameters that change nothing a run computes (logging, the peer's launch helpers).
 HARMLESS = {"clear_params", "debug", "debug_out_file"}
-SENSOR_KINDS = ("odom", "twist", "imu")
-#: Per-sensor suffixes read and acted on.
+SENSOR_KINDS = ("odom", "pose", "twist", "imu")
+_TOPIC = {"", "_config", "_queue_size"}
+#: Per-input suffixes read and acted on, by kind: the peer's names (a pose or twist
+#: topic has one ``_rejection_threshold``, an odometry or IMU one per part).
 SENSOR_SUFFIXES = {
-    "", "_config", "_queue_size", "_differential", "_relative",
-    "_remove_gravitational_acceleration", "_pose_rejection_threshold",
-    "_twist_rejection_threshold", "_linear_acceleration_rejection_threshold",
+    "odom": _TOPIC | {"_differential", "_relative", "_pose_rejection_threshold",
+                      "_twist_rejection_threshold"},
+    "pose": _TOPIC | {"_differential", "_relative", "_rejection_threshold"},
+    "twist": _TOPIC | {"_rejection_threshold"},
+    "imu": _TOPIC | {"_differential", "_relative", "_remove_gravitational_acceleration",
+                     "_pose_rejection_threshold", "_twist_rejection_threshold",
+                     "_linear_acceleration_rejection_threshold"},
 }
 
 
@@ -63,7 +69,7 @@ class FusionConfig:
     def sensor_inputs(self, mounts: dict[str, Mount] | None = None) -> SensorInputs:
         """The inputs of this configuration, with the mounts known so far by frame."""
         return SensorInputs(dict(self.sensors), dict(mounts or {}), self.base_link_frame,
-                            self.gravity, two_d=self.two_d_mode)
+                            self.gravity, two_d=self.two_d_mode, world_frame=self.world_frame)
 
 
 def _matrix(params: dict[str, Any], name: str, default: np.ndarray) -> np.ndarray:
@@ -101,28 +107,35 @@ def _sensors(params: dict[str, Any]) -> tuple[dict[str, SensorConfig], list[str]
         while f"{kind}{index}" in params:
             name = f"{kind}{index}"
             update = _update_vector(params, name)
-            if kind == "odom" and any(update[:6]):
-                unsupported.append(f"{name}_config (pose entries: only the twist is fused)")
-            if params.get(f"{name}_differential", False):
+            if kind == "pose":
+                # The peer takes only a pose topic's pose entries.
+                update = tuple(flag and i < 6 for i, flag in enumerate(update))
+            differential = bool(params.get(f"{name}_differential", False))
+            if differential and kind == "imu":
                 unsupported.append(f"{name}_differential")
             sensors[name] = SensorConfig(
-                name=name, kind=kind, topic=str(params[name]),
-                update=update if kind != "odom" else tuple(
-                    flag and i >= 6 for i, flag in enumerate(update)),
-                pose_threshold=_threshold(params, f"{name}_pose_rejection_threshold"),
-                twist_threshold=_threshold(params, f"{name}_twist_rejection_threshold"),
+                name=name, kind=kind, topic=str(params[name]), update=update,
+                pose_threshold=_threshold(params, f"{name}_rejection_threshold"
+                                          if kind == "pose" else
+                                          f"{name}_pose_rejection_threshold"),
+                twist_threshold=_threshold(params, f"{name}_rejection_threshold"
+                                           if kind == "twist" else
+                                           f"{name}_twist_rejection_threshold"),
                 acceleration_threshold=_threshold(
                     params, f"{name}_linear_acceleration_rejection_threshold"),
                 remove_gravity=bool(params.get(f"{name}_remove_gravitational_acceleration",
                                                False)),
-                relative=bool(params.get(f"{name}_relative", False)),
+                # Both set: the peer says so in an error line and takes the differential.
+                relative=bool(params.get(f"{name}_relative", False)) and not differential,
+                differential=differential and kind != "imu",
                 queue_size=int(params.get(f"{name}_queue_size", 10)))
             index += 1
     return sensors, unsupported
 
 
 def _is_sensor_parameter(name: str, sensors: dict[str, SensorConfig]) -> bool:
-    return any(name == sensor + suffix for sensor in sensors for suffix in SENSOR_SUFFIXES)
+    return any(name == sensor + suffix for sensor, config in sensors.items()
+               for suffix in SENSOR_SUFFIXES[config.kind])
 
 
 def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConfig:

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from estimation_nodes.core.fusion import inputs, motion, state, steps
+from estimation_nodes.core.transforms import rigid
 from estimation_nodes.core.fusion.filter import FusionFilter, FusionSettings
 from estimation_nodes.core.fusion.steps import Measurement
 from estimation_nodes.params.fusion import FusionConfigError, fusion_config
@@ -233,3 +234,199 @@ def test_a_two_d_robots_file_keeps_the_estimate_in_the_plane(kind):
     assert finals[True][state.YAW] == pytest.approx(0.198, abs=0.01)
     assert np.hypot(finals[True][state.X], finals[True][state.Y]) == pytest.approx(1.98,
                                                                                    rel=0.05)
+
+
+# --- pose inputs: odomN pose entries, poseN; _relative, _differential --------------------
+
+POSE_ONLY = tuple(i < 6 for i in range(15))
+
+
+def pose_message(stamp_ns: int, position, quaternion, covariance, frame: str = "odom"
+                 ) -> SimpleNamespace:
+    """A geometry_msgs/PoseWithCovarianceStamped by its field names."""
+    odometry = odometry_message(stamp_ns, position=position, quaternion=quaternion,
+                                pose_covariance=covariance, frame=frame)
+    return SimpleNamespace(header=odometry.header, pose=odometry.pose)
+
+
+def random_quaternion() -> tuple[float, ...]:
+    q = RNG.normal(size=4)
+    return tuple(q / np.linalg.norm(q))
+
+
+def random_covariance(size: int = 6) -> np.ndarray:
+    a = RNG.normal(size=(size, size)) * 0.1
+    return a @ a.T + np.eye(size) * 0.01
+
+
+def rpy_of(transform: rigid.Transform) -> tuple[float, float, float]:
+    return state.rpy_from_rotation(state.rotation_from_quaternion(*transform.rotation))
+
+
+def pose_inputs(**sensor_parameters) -> tuple:
+    """A config with one pose input ``pose0`` (all six entries), its inputs and a filter."""
+    config = fusion_config({"pose0": "pose", "pose0_config": [True] * 15,
+                            **sensor_parameters})
+    return config, config.sensor_inputs({"gps_origin": GPS_ORIGIN}), FusionFilter(
+        config.settings)
+
+
+#: A pose input's frame placed in the world frame (odom): 10 m east, turned 30 degrees.
+GPS_ORIGIN_TRANSFORM = rigid.Transform((10.0, -2.0, 0.5), state.quaternion_from_rpy(0.0, 0.0,
+                                                                                      0.5236))
+GPS_ORIGIN = inputs.Mount(state.rotation_from_quaternion(*GPS_ORIGIN_TRANSFORM.rotation),
+                          np.array(GPS_ORIGIN_TRANSFORM.translation))
+
+
+def queued(fusion: FusionFilter) -> list[Measurement]:
+    return [entry[2] for entry in sorted(fusion._queue)]
+
+
+def test_a_pose_in_a_placed_frame_is_measured_in_the_world_frame():
+    config, sensor_inputs, fusion = pose_inputs()
+    # The pose topic's config is cut to its pose entries, as the peer does.
+    assert config.sensors["pose0"].update == POSE_ONLY
+    position, quaternion, covariance = (1.0, 2.0, 0.3), random_quaternion(), random_covariance()
+    sensor_inputs.add(config.sensors["pose0"],
+                      pose_message(7, position, quaternion, covariance, "gps_origin"), fusion)
+    (measured,) = queued(fusion)
+    expected = GPS_ORIGIN_TRANSFORM * rigid.Transform(position, quaternion)
+    assert measured.indices == tuple(range(6))
+    np.testing.assert_allclose(measured.z[:3], expected.translation, atol=1e-9)
+    np.testing.assert_allclose(measured.z[3:6], rpy_of(expected), atol=1e-9)
+    turn = np.kron(np.eye(2), GPS_ORIGIN.rotation)
+    np.testing.assert_allclose(measured.covariance[:6, :6], turn @ covariance @ turn.T,
+                               atol=1e-9)
+    assert (measured.stamp_ns, measured.source) == (7, "pose0")
+
+
+def test_a_pose_correction_is_the_kalman_correction_of_the_world_pose():
+    config, sensor_inputs, fusion = pose_inputs()
+    fusion.initialized = True
+    fusion.x = random_state()
+    a = RNG.normal(size=(15, 15))
+    fusion.p = a @ a.T + np.eye(15)
+    x, p = fusion.x.copy(), fusion.p.copy()
+    position, quaternion, covariance = (3.0, -1.0, 0.2), random_quaternion(), random_covariance()
+    sensor_inputs.add(config.sensors["pose0"],
+                      pose_message(0, position, quaternion, covariance, "odom"), fusion)
+    fusion.update(0)
+    z = np.array([*position, *rpy_of(rigid.Transform(position, quaternion))])
+    x_expected, p_expected = kalman_correction(x, p, z, covariance, list(range(6)))
+    np.testing.assert_allclose(fusion.x, x_expected, atol=1e-9)
+    np.testing.assert_allclose(fusion.p, p_expected, atol=1e-9)
+
+
+def test_a_mount_turns_the_pose_mask_with_the_frame():
+    # A frame turned 90 degrees about z: its x is the world's y.
+    frame = inputs.Mount.from_rpy((0.0, 0.0, 0.0), (0.0, 0.0, math.pi / 2))
+    update = tuple(i == state.X for i in range(15))
+    measured = inputs.pose(0, inputs.Mount(np.eye(3), np.array([2.0, 0.0, 0.0])),
+                           np.eye(6), update, frame)
+    assert measured.indices == (state.Y,)
+    assert measured.z[state.Y] == pytest.approx(2.0)
+
+
+def test_odometry_feeds_its_pose_and_its_twist_with_their_own_thresholds():
+    config = fusion_config({"odom0": "odom", "odom0_config": [True] * 12 + [False] * 3,
+                            "odom0_pose_rejection_threshold": 2.0,
+                            "odom0_twist_rejection_threshold": 3.0})
+    assert config.unsupported == ()
+    fusion = FusionFilter(config.settings)
+    config.sensor_inputs().add(config.sensors["odom0"], odometry_message(
+        5, (1.0, 0.0, 0.0), position=(4.0, 5.0, 0.0)), fusion)
+    pose_part, twist_part = queued(fusion)
+    assert (pose_part.source, pose_part.threshold, pose_part.indices) == \
+        ("odom0_pose", 2.0, tuple(range(6)))
+    assert (twist_part.source, twist_part.threshold, twist_part.indices) == \
+        ("odom0_twist", 3.0, tuple(range(6, 12)))
+    np.testing.assert_allclose(pose_part.z[:3], [4.0, 5.0, 0.0])
+
+
+def test_a_relative_pose_is_the_pose_since_the_first_one_placed_in_the_world():
+    config, sensor_inputs, fusion = pose_inputs(pose0_relative=True)
+    first = rigid.Transform((5.0, 1.0, 0.0), random_quaternion())
+    later = rigid.Transform((6.0, 3.0, 0.4), random_quaternion())
+    for stamp, pose in ((1, first), (2, later)):
+        sensor_inputs.add(config.sensors["pose0"], pose_message(
+            stamp, pose.translation, pose.rotation, np.eye(6) * 0.01, "gps_origin"), fusion)
+    at_first, at_later = queued(fusion)
+    # The first pose is the frame's origin; the later one is the motion since, placed.
+    np.testing.assert_allclose(at_first.z[:3], GPS_ORIGIN_TRANSFORM.translation, atol=1e-9)
+    np.testing.assert_allclose(at_first.z[3:6], rpy_of(GPS_ORIGIN_TRANSFORM), atol=1e-9)
+    expected = GPS_ORIGIN_TRANSFORM * (first.inverse() * later)
+    np.testing.assert_allclose(at_later.z[:3], expected.translation, atol=1e-9)
+    np.testing.assert_allclose(at_later.z[3:6], rpy_of(expected), atol=1e-9)
+
+
+def test_a_differential_pose_is_the_velocity_between_two_poses_with_the_peers_covariance():
+    config, sensor_inputs, fusion = pose_inputs(pose0_differential=True, pose0_relative=True,
+                                                pose0_rejection_threshold=5.0)
+    assert config.sensors["pose0"].differential and not config.sensors["pose0"].relative
+    first = rigid.Transform((5.0, 1.0, 0.0), state.quaternion_from_rpy(0.1, -0.2, 0.3))
+    later = rigid.Transform((5.1, 1.05, 0.01), state.quaternion_from_rpy(0.11, -0.19, 0.35))
+    c1, c2 = random_covariance(), random_covariance()
+    # No transform is needed: the change between two poses is the same in any frame.
+    for stamp, pose, covariance in ((1_000_000_000, first, c1), (1_250_000_000, later, c2)):
+        sensor_inputs.add(config.sensors["pose0"], pose_message(
+            stamp, pose.translation, pose.rotation, covariance, "unknown_frame"), fusion)
+    (measured,) = queued(fusion)
+    dt = 0.25
+    r0 = state.rotation_from_quaternion(*first.rotation)
+    r1 = state.rotation_from_quaternion(*later.rotation)
+    linear = r0.T @ (np.array(later.translation) - np.array(first.translation)) / dt
+    angular = np.array(state.rpy_from_rotation(r0.T @ r1)) / dt
+    assert measured.indices == tuple(range(6, 12))
+    assert (measured.source, measured.threshold, measured.stamp_ns) == \
+        ("pose0", 5.0, 1_250_000_000)
+    np.testing.assert_allclose(measured.z[6:12], [*linear, *angular], atol=1e-9)
+    np.testing.assert_allclose(measured.covariance[6:12, 6:12], (c1 + c2) * dt, atol=1e-12)
+    assert sensor_inputs.dropped == {}
+
+
+def test_a_differential_pose_at_the_time_of_the_last_one_is_dropped():
+    config, sensor_inputs, fusion = pose_inputs(pose0_differential=True)
+    for _ in range(2):
+        sensor_inputs.add(config.sensors["pose0"], pose_message(
+            3, (1.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), np.eye(6) * 0.01), fusion)
+    assert fusion.queued == 0
+    assert sensor_inputs.dropped == {
+        "pose0: at the time of the one before, no velocity to take": 1}
+
+
+@pytest.mark.parametrize(("frame", "position", "reason"), [
+    ("base_link", (1.0, 0.0, 0.0), "pose0: no transform from 'base_link' to 'odom'"),
+    ("", (1.0, 0.0, 0.0), "pose0: no transform from '' to 'odom'"),
+    ("odom", (math.nan, 0.0, 0.0), "pose0: a non-finite value"),
+])
+def test_a_pose_that_cannot_be_placed_or_read_is_dropped_with_its_reason(frame, position,
+                                                                         reason):
+    config, sensor_inputs, fusion = pose_inputs(pose0_relative=True)
+    sensor_inputs.add(config.sensors["pose0"], pose_message(
+        1, position, (0.0, 0.0, 0.0, 1.0), np.eye(6) * 0.01, frame), fusion)
+    assert fusion.queued == 0
+    assert sensor_inputs.dropped == {reason: 1}
+    # Nothing was remembered as the first pose: the next good one is.
+    sensor_inputs.add(config.sensors["pose0"], pose_message(
+        2, (2.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), np.eye(6) * 0.01), fusion)
+    np.testing.assert_allclose(queued(fusion)[0].z[:6], 0.0, atol=1e-12)
+
+
+def test_a_pose_beyond_its_rejection_threshold_is_rejected():
+    config, sensor_inputs, fusion = pose_inputs(pose0_rejection_threshold=3.0)
+    for stamp, x in ((0, 0.0), (10_000_000, 50.0)):
+        sensor_inputs.add(config.sensors["pose0"], pose_message(
+            stamp, (x, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0), np.eye(6) * 0.01), fusion)
+        fusion.update(stamp)
+    assert fusion.counts.applied == {"pose0": 1}
+    assert fusion.counts.rejected == {"pose0": 1}
+    assert fusion.x[state.X] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_the_config_takes_the_peers_threshold_names_per_kind():
+    config = fusion_config({"twist0": "twist", "twist0_config": [False] * 6 + [True] * 6 +
+                            [False] * 3, "twist0_rejection_threshold": 4.0,
+                            "twist0_pose_rejection_threshold": 2.0})
+    assert config.sensors["twist0"].twist_threshold == 4.0
+    # A twist topic has no pose threshold in the peer: said, not silently taken.
+    assert config.unsupported == ("twist0_pose_rejection_threshold",)

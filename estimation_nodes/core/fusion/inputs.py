@@ -5,6 +5,10 @@ and origin of the sensor frame in the robot's frame, ``Mount``), and the update 
 the ``*_config`` parameter, and returns a ``Measurement`` (or None when nothing is left
 to measure). The mask goes through the same rotation as the data: a measured axis
 that the mount turns into another one measures that one.
+- ``pose``: a pose given in some frame, placed in the world frame by that frame's
+  ``Mount`` in the world (the peer's tf lookup from the message's frame to world_frame).
+- ``pose_change``: two consecutive poses as the velocity that moves one to the other
+  (``_differential``), with the peer's covariance (R_previous + R_current) dt.
 - ``twist``: linear and angular velocity; v_base = R v + o x omega_state.
 - ``imu_orientation``: an IMU reports its attitude in the world frame, so only the
   mount's angles are taken off (roll, pitch and yaw minus the mount's, the roll/pitch
@@ -26,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimation_nodes.core.fusion.state import (
-    ACCELERATION, AX, AZ, PITCH, POSE, ROLL, STATE_SIZE, TWIST, VPITCH, VROLL, VX, VZ, Z,
+    ACCELERATION, AX, AZ, PITCH, POSE, ROLL, STATE_SIZE, TWIST, VPITCH, VROLL, VX, VZ, X, Z,
     rotation_from_quaternion, rotation_from_rpy, rpy_from_rotation, wrap)
 from estimation_nodes.core.fusion.steps import Measurement
 from estimation_nodes.core.validation import FloatArray
@@ -41,7 +45,8 @@ PLANAR_VARIANCE = 1e-6
 
 @dataclass(frozen=True)
 class Mount:
-    """Where a sensor sits on the robot: its frame's rotation and origin in the robot's."""
+    """Where a frame sits in another: its rotation and origin there. A sensor's frame on the
+    robot, a pose input's frame in the world, or a pose itself (the body's frame)."""
 
     rotation: FloatArray = field(default_factory=lambda: np.eye(3))
     origin: FloatArray = field(default_factory=lambda: np.zeros(3))
@@ -50,6 +55,13 @@ class Mount:
     def from_rpy(cls, xyz: tuple[float, float, float], rpy: tuple[float, float, float]
                  ) -> "Mount":
         return cls(rotation_from_rpy(*rpy), np.asarray(xyz, dtype=float))
+
+    def __mul__(self, other: "Mount") -> "Mount":
+        """``other``, given in this frame, in this frame's parent (tf2's composition)."""
+        return Mount(self.rotation @ other.rotation, self.rotation @ other.origin + self.origin)
+
+    def inverse(self) -> "Mount":
+        return Mount(self.rotation.T, -self.rotation.T @ self.origin)
 
 
 IDENTITY = Mount()
@@ -97,6 +109,43 @@ def twist(stamp_ns: int, linear: FloatArray, angular: FloatArray, covariance6: F
     mask[VX:VX + 3] = _masked(r, tuple(update[VX:VX + 3]))
     mask[VROLL:VROLL + 3] = _masked(r, tuple(update[VROLL:VROLL + 3]))
     return _measurement(stamp_ns, z, covariance, _only(mask, TWIST), threshold, source)
+
+
+def pose(stamp_ns: int, body: Mount, covariance6: FloatArray, update: tuple[bool, ...],
+         frame: Mount = IDENTITY, threshold: float = math.inf, source: str = ""
+         ) -> Measurement | None:
+    """A pose (``body``: the robot's frame in the message's frame) as a measurement of x, y,
+    z, roll, pitch and yaw in the world: ``frame * body``, ``frame`` being the message's
+    frame in the world. Its covariance and mask turn with the frame's rotation."""
+    placed = frame * body
+    z = np.zeros(STATE_SIZE)
+    z[X:X + 3] = placed.origin
+    z[ROLL:ROLL + 3] = rpy_from_rotation(placed.rotation)
+    rot6 = _block_rotation(frame.rotation)
+    covariance = np.zeros((STATE_SIZE, STATE_SIZE))
+    covariance[POSE, POSE] = rot6 @ covariance6 @ rot6.T
+    mask = list(update)
+    mask[X:X + 3] = _masked(frame.rotation, tuple(update[X:X + 3]))
+    mask[ROLL:ROLL + 3] = _masked(frame.rotation, tuple(update[ROLL:ROLL + 3]))
+    return _measurement(stamp_ns, z, covariance, _only(mask, POSE), threshold, source)
+
+
+def pose_change(stamp_ns: int, previous: Mount, current: Mount, dt: float,
+                covariance6: FloatArray, update: tuple[bool, ...], threshold: float = math.inf,
+                source: str = "") -> Measurement | None:
+    """Two consecutive poses ``dt`` apart as the twist that moves ``previous`` to ``current``
+    (the peer's ``_differential``): the change previous^-1 current, in the previous pose's
+    frame, over dt: its translation / dt and its roll, pitch, yaw / dt.
+
+    ``covariance6`` is the sum of the two poses' covariances; the twist's is that times dt,
+    as the peer has it. The pose entries of ``update`` say which rates are measured.
+    """
+    change = previous.inverse() * current
+    twist_update = [False] * STATE_SIZE
+    twist_update[TWIST] = update[POSE]
+    return twist(stamp_ns, change.origin / dt,
+                 np.asarray(rpy_from_rotation(change.rotation)) / dt, covariance6 * dt,
+                 tuple(twist_update), np.zeros(3), IDENTITY, threshold, source)
 
 
 def imu_orientation(stamp_ns: int, quaternion: tuple[float, float, float, float],

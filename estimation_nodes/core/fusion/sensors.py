@@ -4,8 +4,16 @@ A message here is anything with the ROS field names (an rclpy message, or one th
 ``rosbags`` library decoded): the same code serves the node and the offline run. Per
 input, as the peer: a message not newer than the last one of its part (pose, twist,
 acceleration) is dropped and counted; an IMU part whose first covariance entry is -1
-is absent; an odometry message feeds its twist part here (its pose part when its
-``_config`` asks for one is not supported yet and is refused when configured).
+is absent. An odometry message feeds its pose part (the pose entries of its
+``_config``) and its twist part; a ``poseN`` message its pose part.
+
+A pose part is placed in the world frame by its message's frame: the world frame itself,
+or a frame whose ``Mount`` in the world is known; else it is dropped and counted. With
+``_relative`` a pose is taken relative to the input's first one (the peer's
+initial^-1 pose, before the frame); with ``_differential`` two consecutive poses are a
+velocity (``inputs.pose_change``), the first one only remembered, and no frame is needed
+(the change between two poses in one frame is the same in any). A pose with a
+non-finite number is dropped and counted, so it is never remembered.
 """
 
 from __future__ import annotations
@@ -18,14 +26,16 @@ import numpy as np
 from estimation_nodes.core.fusion import inputs
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
-from estimation_nodes.core.fusion.state import POSE, ROLL, VROLL, rotation_from_quaternion, \
-    rotation_from_rpy
+from estimation_nodes.core.fusion.state import POSE, ROLL, TWIST, VROLL, \
+    rotation_from_quaternion, rotation_from_rpy
 from estimation_nodes.core.fusion.steps import Measurement
+from estimation_nodes.core.validation import FloatArray
 
 
 @dataclass(frozen=True)
 class SensorConfig:
-    """One ``odomN`` / ``twistN`` / ``imuN`` input, by the peer's parameter names."""
+    """One ``odomN`` / ``poseN`` / ``twistN`` / ``imuN`` input, by the peer's parameter
+    names."""
 
     name: str
     kind: str
@@ -36,7 +46,21 @@ class SensorConfig:
     acceleration_threshold: float = math.inf
     remove_gravity: bool = False
     relative: bool = False
+    differential: bool = False
     queue_size: int = 10
+
+    @property
+    def pose_part(self) -> str:
+        """The name the peer gives the pose part's measurements."""
+        return f"{self.name}_pose" if self.kind == "odom" else self.name
+
+    @property
+    def measures_pose(self) -> bool:
+        return self.kind in ("odom", "pose") and any(self.update[POSE])
+
+    @property
+    def measures_twist(self) -> bool:
+        return self.kind in ("odom", "twist") and any(self.update[TWIST])
 
 
 def stamp_ns(header) -> int:
@@ -48,14 +72,20 @@ class SensorInputs:
     """Turns messages into queued measurements; counts what it drops and why."""
 
     sensors: dict[str, SensorConfig]
-    #: Mounts by frame id (the sensor frame's pose in ``base_link_frame``).
+    #: Mounts by frame id: a sensor frame's pose in ``base_frame``, a pose input's frame's
+    #: pose in ``world_frame`` (a frame is fixed either to the robot or to the world).
     mounts: dict[str, Mount] = field(default_factory=dict)
     base_frame: str = "base_link"
     gravity: float = inputs.GRAVITY
     #: ``two_d_mode``: every measurement also holds z, roll, pitch and their rates at 0.
     two_d: bool = False
+    world_frame: str = "odom"
     dropped: dict[str, int] = field(default_factory=dict)
     _last: dict[str, int] = field(default_factory=dict)
+    #: ``_relative``: each pose part's first pose.
+    _initial: dict[str, Mount] = field(default_factory=dict)
+    #: ``_differential``: each pose part's last pose, its time and covariance.
+    _previous: dict[str, tuple[int, Mount, FloatArray]] = field(default_factory=dict)
 
     def _drop(self, reason: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
@@ -64,6 +94,24 @@ class SensorInputs:
         if frame_id in ("", self.base_frame):
             return inputs.IDENTITY
         return self.mounts.get(frame_id)
+
+    def placement(self, frame_id: str) -> Mount | None:
+        """A pose input's frame in the world frame, None when unknown."""
+        if frame_id == self.world_frame:
+            return inputs.IDENTITY
+        return self.mounts.get(frame_id)
+
+    def frames(self, sensor: SensorConfig, msg) -> list[tuple[str, str]]:
+        """The (parent, child) transforms a message of ``sensor`` needs: its sensor frame on
+        the robot, its pose frame in the world (none for a differential pose)."""
+        needed = []
+        if sensor.measures_pose and not sensor.differential:
+            needed.append((self.world_frame, msg.header.frame_id))
+        if sensor.kind == "odom" and sensor.measures_twist:
+            needed.append((self.base_frame, msg.child_frame_id))
+        elif sensor.kind in ("twist", "imu"):
+            needed.append((self.base_frame, msg.header.frame_id))
+        return needed
 
     def _newer(self, part: str, stamp: int) -> bool:
         if stamp < self._last.get(part, stamp):
@@ -74,17 +122,65 @@ class SensorInputs:
 
     def add(self, sensor: SensorConfig, msg, fusion: FusionFilter) -> int:
         """Queue the measurements of one message into ``fusion``; how many it queued."""
+        made = []
         if sensor.kind == "imu":
             made = self._imu(sensor, msg, fusion)
-        else:
-            made = self._odometry(sensor, msg, fusion)
+        if sensor.measures_pose:
+            made += self._pose(sensor, msg)
+        if sensor.measures_twist:
+            made += self._twist(sensor, msg, fusion)
         if self.two_d:
             made = [inputs.force_two_d(measurement) for measurement in made]
         for measurement in made:
             fusion.enqueue(measurement)
         return len(made)
 
-    def _odometry(self, sensor: SensorConfig, msg, fusion: FusionFilter) -> list[Measurement]:
+    def _pose(self, sensor: SensorConfig, msg) -> list[Measurement]:
+        part = sensor.pose_part
+        stamp = stamp_ns(msg.header)
+        if not self._newer(part, stamp):
+            return []
+        p = msg.pose.pose
+        position = _vector(p.position)
+        quaternion = (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
+        covariance = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)
+        if not (np.all(np.isfinite(position)) and all(map(math.isfinite, quaternion))
+                and np.all(np.isfinite(covariance))):
+            self._drop(f"{part}: a non-finite value")
+            return []
+        if not any(quaternion):
+            # The peer's reading of an unset orientation: no rotation.
+            quaternion = (0.0, 0.0, 0.0, 1.0)
+        body = Mount(rotation_from_quaternion(*quaternion), position)
+        if sensor.differential:
+            made = self._pose_change(sensor, part, stamp, body, covariance)
+        else:
+            frame = self.placement(msg.header.frame_id)
+            if frame is None:
+                self._drop(f"{part}: no transform from {msg.header.frame_id!r} to "
+                           f"{self.world_frame!r}")
+                return []
+            if sensor.relative:
+                body = self._initial.setdefault(part, body).inverse() * body
+            made = inputs.pose(stamp, body, covariance, sensor.update, frame,
+                               sensor.pose_threshold, part)
+        return [made] if made else []
+
+    def _pose_change(self, sensor: SensorConfig, part: str, stamp: int, body: Mount,
+                     covariance: FloatArray) -> Measurement | None:
+        previous = self._previous.get(part)
+        self._previous[part] = (stamp, body, covariance)
+        if previous is None:
+            return None
+        previous_stamp, previous_body, previous_covariance = previous
+        if stamp == previous_stamp:
+            self._drop(f"{part}: at the time of the one before, no velocity to take")
+            return None
+        return inputs.pose_change(stamp, previous_body, body, (stamp - previous_stamp) * 1e-9,
+                                  covariance + previous_covariance, sensor.update,
+                                  sensor.pose_threshold, part)
+
+    def _twist(self, sensor: SensorConfig, msg, fusion: FusionFilter) -> list[Measurement]:
         stamp = stamp_ns(msg.header)
         frame = msg.child_frame_id if sensor.kind == "odom" else msg.header.frame_id
         mount = self.mount(frame)
