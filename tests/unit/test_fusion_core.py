@@ -430,3 +430,89 @@ def test_the_config_takes_the_peers_threshold_names_per_kind():
     assert config.sensors["twist0"].twist_threshold == 4.0
     # A twist topic has no pose threshold in the peer: said, not silently taken.
     assert config.unsupported == ("twist0_pose_rejection_threshold",)
+
+
+# --- a covariance that cannot be one ---------------------------------------------------
+
+def twist_covariance(vx_vy_block) -> np.ndarray:
+    covariance = np.eye(6) * 0.01
+    covariance[:2, :2] = vx_vy_block
+    return covariance
+
+
+@pytest.mark.parametrize(("block", "reason"), [
+    # Correlation 2: eigenvalues 3 and -1.
+    ([[1.0, 2.0], [2.0, 1.0]], "a covariance that is not symmetric positive semi-definite"),
+    ([[1.0, 0.5], [0.0, 1.0]], "a covariance that is not symmetric positive semi-definite"),
+    ([[1.0, math.nan], [math.nan, 1.0]], "a non-finite covariance"),
+    ([[math.inf, 0.0], [0.0, 1.0]], "a non-finite covariance"),
+])
+def test_a_measurement_whose_covariance_cannot_be_one_is_dropped_with_the_reason(block,
+                                                                                   reason):
+    config = fusion_config({"odom0": "odom", "odom0_config": list(TWIST_AND_YAW_RATE)})
+    fusion = FusionFilter(config.settings)
+    sensor_inputs = config.sensor_inputs()
+    sensor_inputs.add(config.sensors["odom0"], odometry_message(0, (1.0, 0.0, 0.0)), fusion)
+    fusion.update(0)
+    x, p = fusion.x.copy(), fusion.p.copy()
+    made = sensor_inputs.add(config.sensors["odom0"], odometry_message(
+        0, (2.0, 0.5, 0.0), twist_covariance=twist_covariance(block)), fusion)
+    fusion.update(0)
+    assert made == 0
+    assert sensor_inputs.dropped == {f"odom0_twist: {reason}": 1}
+    np.testing.assert_array_equal(fusion.x, x)
+    np.testing.assert_array_equal(fusion.p, p)
+
+
+def test_an_indefinite_covariance_of_entries_not_measured_is_not_read_but_a_nan_is():
+    config = fusion_config({"odom0": "odom", "odom0_config": list(TWIST_AND_YAW_RATE)})
+    covariance = np.eye(6) * 0.01
+    covariance[3, 4] = covariance[4, 3] = 5.0       # vroll-vpitch: indefinite, not measured
+    fusion = FusionFilter(config.settings)
+    sensor_inputs = config.sensor_inputs()
+    assert sensor_inputs.add(config.sensors["odom0"], odometry_message(
+        0, (1.0, 0.0, 0.0), twist_covariance=covariance), fusion) == 1
+    assert sensor_inputs.dropped == {}
+    # A NaN anywhere would spread through the frame's rotation to every entry.
+    covariance[2, 2] = math.nan                     # vz: not in the config
+    assert sensor_inputs.add(config.sensors["odom0"], odometry_message(
+        1, (1.0, 0.0, 0.0), twist_covariance=covariance), fusion) == 0
+    assert sensor_inputs.dropped == {"odom0_twist: a non-finite covariance": 1}
+
+
+def test_the_covariance_check_of_a_measurement_made_elsewhere():
+    z = np.zeros(15)
+    good, indefinite, nan = np.eye(15), np.eye(15), np.eye(15)
+    indefinite[6, 7] = indefinite[7, 6] = 3.0
+    nan[7, 7] = math.nan
+    assert steps.covariance_problem(Measurement(0, z, good, (6, 7))) is None
+    assert steps.covariance_problem(Measurement(0, z, indefinite, (6, 7))) == \
+        "a covariance that is not symmetric positive semi-definite"
+    assert steps.covariance_problem(Measurement(0, z, nan, (6, 7))) == \
+        "a non-finite covariance"
+
+
+@pytest.mark.parametrize("kind", ["ekf", "ukf"])
+def test_a_negative_or_zero_variance_is_taken_as_the_peer_takes_it(kind):
+    """|variance|, at least 1e-9: also when the measurement initializes the filter, so P
+    never starts with a negative variance."""
+    config = fusion_config({"odom0": "odom", "odom0_config": list(TWIST_AND_YAW_RATE),
+                            "filter_type": kind})
+    fusion = FusionFilter(config.settings)
+    sensor_inputs = config.sensor_inputs()
+    covariance = np.diag([-0.04, 0.0, 1.0, 1.0, 1.0, 0.09])
+    sensor_inputs.add(config.sensors["odom0"], odometry_message(
+        0, (1.0, 0.0, 0.0), twist_covariance=covariance), fusion)
+    fusion.update(0)
+    measured = [state.VX, state.VY, state.VYAW]
+    np.testing.assert_array_equal(np.diag(fusion.p)[measured], [0.04, 1e-9, 0.09])
+    assert np.all(np.linalg.eigvalsh(fusion.p) > 0)
+    if kind == "ekf":
+        x, p = fusion.x.copy(), fusion.p.copy()
+        sensor_inputs.add(config.sensors["odom0"], odometry_message(
+            0, (1.5, 0.1, 0.0), (0.0, 0.0, 0.2), covariance), fusion)
+        fusion.update(0)
+        x_expected, p_expected = kalman_correction(
+            x, p, np.array([1.5, 0.1, 0.2]), np.diag([0.04, 1e-9, 0.09]), measured)
+        np.testing.assert_allclose(fusion.x, x_expected, atol=1e-9)
+        np.testing.assert_allclose(fusion.p, p_expected, atol=1e-9)

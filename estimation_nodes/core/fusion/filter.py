@@ -1,7 +1,8 @@
 """The fusion filter as robot_localization's node runs it, with no ROS in it.
 
 - The first measurement initializes: the entries it measures take its values and
-  covariance, the others keep the initial state and ``initial_estimate_covariance``.
+  covariance (variances floored as a correction floors them), the others keep the
+  initial state and ``initial_estimate_covariance``.
 - Later ones predict from the last measurement's time to theirs (none when they are
   not later), then correct; the last measurement time only moves forward.
 - ``update(now)`` is the node's periodic step: it takes the queued measurements whose
@@ -100,8 +101,9 @@ class FusionFilter:
 
     def _initialize(self, measurement: Measurement) -> None:
         idx = list(measurement.indices)
-        self.x[idx] = measurement.z[idx]
-        self.p[np.ix_(idx, idx)] = measurement.covariance[np.ix_(idx, idx)]
+        # R with its variances floored, as a correction would take it: the peer copies the
+        # message's, so a negative variance there would make P indefinite.
+        self.x[idx], self.p[np.ix_(idx, idx)] = steps.subset(measurement)
         self.initialized = True
         self.last_time_ns = measurement.stamp_ns
         self.counts.add(self.counts.applied, measurement.source)

@@ -4,7 +4,8 @@ A message here is anything with the ROS field names (an rclpy message, or one th
 ``rosbags`` library decoded): the same code serves the node and the offline run. Per
 input, as the peer: a message not newer than the last one of its part (pose, twist,
 acceleration) is dropped and counted; an IMU part whose first covariance entry is -1
-is absent. An odometry message feeds its pose part (the pose entries of its
+is absent; a measurement whose covariance cannot be one (``steps.covariance_problem``)
+is dropped and counted. An odometry message feeds its pose part (the pose entries of its
 ``_config``) and its twist part; a ``poseN`` message its pose part.
 
 A pose part is placed in the world frame by its message's frame: the world frame itself,
@@ -28,7 +29,7 @@ from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.state import POSE, ROLL, TWIST, VROLL, \
     rotation_from_quaternion, rotation_from_rpy
-from estimation_nodes.core.fusion.steps import Measurement
+from estimation_nodes.core.fusion.steps import Measurement, covariance_problem
 from estimation_nodes.core.validation import FloatArray
 
 
@@ -113,6 +114,14 @@ class SensorInputs:
             needed.append((self.base_frame, msg.header.frame_id))
         return needed
 
+    def _finite(self, part: str, covariance) -> bool:
+        """Whether the covariance a part reads is all finite; dropped and counted if not (a
+        rotation would spread a NaN to every entry, an inf would become NaNs)."""
+        if all(map(math.isfinite, np.ravel(covariance))):
+            return True
+        self._drop(f"{part}: a non-finite covariance")
+        return False
+
     def _newer(self, part: str, stamp: int) -> bool:
         if stamp < self._last.get(part, stamp):
             self._drop(f"{part}: older than the last one")
@@ -131,9 +140,15 @@ class SensorInputs:
             made += self._twist(sensor, msg, fusion)
         if self.two_d:
             made = [inputs.force_two_d(measurement) for measurement in made]
+        queued = 0
         for measurement in made:
+            problem = covariance_problem(measurement)
+            if problem:
+                self._drop(f"{measurement.source}: {problem}")
+                continue
             fusion.enqueue(measurement)
-        return len(made)
+            queued += 1
+        return queued
 
     def _pose(self, sensor: SensorConfig, msg) -> list[Measurement]:
         part = sensor.pose_part
@@ -143,11 +158,12 @@ class SensorInputs:
         p = msg.pose.pose
         position = _vector(p.position)
         quaternion = (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
-        covariance = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)
-        if not (np.all(np.isfinite(position)) and all(map(math.isfinite, quaternion))
-                and np.all(np.isfinite(covariance))):
+        if not (np.all(np.isfinite(position)) and all(map(math.isfinite, quaternion))):
             self._drop(f"{part}: a non-finite value")
             return []
+        if not self._finite(part, msg.pose.covariance):
+            return []
+        covariance = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)
         if not any(quaternion):
             # The peer's reading of an unset orientation: no rotation.
             quaternion = (0.0, 0.0, 0.0, 1.0)
@@ -188,7 +204,7 @@ class SensorInputs:
             self._drop(f"{sensor.name}: no transform from {frame!r} to {self.base_frame!r}")
             return []
         part = f"{sensor.name}_twist"
-        if not self._newer(part, stamp):
+        if not (self._newer(part, stamp) and self._finite(part, msg.twist.covariance)):
             return []
         t = msg.twist.twist
         covariance = np.asarray(msg.twist.covariance, dtype=float).reshape(6, 6)
@@ -209,13 +225,15 @@ class SensorInputs:
         q = msg.orientation
         quaternion = (q.x, q.y, q.z, q.w)
         if any(sensor.update[POSE.start + 3:POSE.stop]) and has_orientation \
-                and self._newer(f"{sensor.name}_pose", stamp):
+                and self._newer(f"{sensor.name}_pose", stamp) \
+                and self._finite(f"{sensor.name}_pose", msg.orientation_covariance):
             made.append(inputs.imu_orientation(
                 stamp, quaternion, _matrix3(msg.orientation_covariance), sensor.update,
                 mount, sensor.pose_threshold, f"{sensor.name}_pose"))
         if any(sensor.update[VROLL:VROLL + 3]) \
                 and abs(msg.angular_velocity_covariance[0] + 1.0) >= 1e-9 \
-                and self._newer(f"{sensor.name}_twist", stamp):
+                and self._newer(f"{sensor.name}_twist", stamp) \
+                and self._finite(f"{sensor.name}_twist", msg.angular_velocity_covariance):
             covariance = np.zeros((6, 6))
             covariance[3:, 3:] = _matrix3(msg.angular_velocity_covariance)
             made.append(inputs.twist(
@@ -224,7 +242,9 @@ class SensorInputs:
                 sensor.twist_threshold, f"{sensor.name}_twist"))
         if any(sensor.update[12:15]) \
                 and abs(msg.linear_acceleration_covariance[0] + 1.0) >= 1e-9 \
-                and self._newer(f"{sensor.name}_acceleration", stamp):
+                and self._newer(f"{sensor.name}_acceleration", stamp) \
+                and self._finite(f"{sensor.name}_acceleration",
+                                 msg.linear_acceleration_covariance):
             made.append(inputs.acceleration(
                 stamp, _vector(msg.linear_acceleration),
                 _matrix3(msg.linear_acceleration_covariance), sensor.update,
