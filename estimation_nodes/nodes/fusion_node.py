@@ -16,9 +16,10 @@ frame other than ``base_link_frame`` needs its mount, and a pose's frame other t
 estimate goes on ``/tf`` too: ``odom -> base_link`` when ``world_frame`` is the odom
 frame, ``map -> odom`` (through the tree's ``odom -> base_link`` at the estimate's time)
 when it is the map frame, stamped with the estimate's time plus
-``transform_time_offset``. A clock that jumps back (a bag played again) resets the
-filter, as the peer does. A message with a non-finite value in what it feeds is dropped
-and counted, so nothing NaN is ever published.
+``transform_time_offset``. A pose on ``set_pose`` (geometry_msgs/PoseWithCovarianceStamped)
+puts the estimate there, as the peer's topic does. A clock that jumps back (a bag played
+again) resets the filter, as the peer does. A message with a non-finite value in what it
+feeds is dropped and counted, so nothing NaN is ever published.
 """
 
 from __future__ import annotations
@@ -95,6 +96,8 @@ class FusionNode(Node):
         # Not self._subscriptions: that is rclpy's own list of the node's subscriptions.
         self._sensor_subscriptions = [self._subscribe(sensor)
                                       for sensor in self._config.sensors.values()]
+        self._set_pose_subscription = self.create_subscription(
+            PoseWithCovarianceStamped, "set_pose", self._on_set_pose, 1)
         self._timer = self.create_timer(1.0 / self._config.frequency, self._on_timer)
 
     def _subscribe(self, sensor):
@@ -133,6 +136,16 @@ class FusionNode(Node):
             return
         self._inputs.mounts[frame] = Mount(rotation_from_quaternion(*t.rotation),
                                            np.asarray(t.translation, dtype=float))
+
+    def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        """The estimate put at the pose (the peer's set_pose topic)."""
+        self._mount_from_tf(self._config.world_frame, msg.header.frame_id, msg.header.stamp)
+        if self._inputs.set_pose(msg, self._fusion, self.get_clock().now().nanoseconds):
+            p = msg.pose.pose.position
+            self.get_logger().info(f"set_pose: the estimate is at x {p.x:.3f} y {p.y:.3f} "
+                                   f"z {p.z:.3f} in {msg.header.frame_id!r}")
+        else:
+            self.get_logger().warning(f"not used: {self._inputs.last_dropped}")
 
     def _on_time_jump_back(self) -> None:
         """A clock that went back (a bag played again): start over, as the peer does."""

@@ -171,3 +171,28 @@ def test_a_pose_in_a_frame_with_no_place_in_the_world_is_dropped_and_counted(fus
     assert node._inputs.dropped == {"odom0_pose: no transform from 'elsewhere' to 'odom'": 1}
     # The twist part does not depend on it: it was queued.
     assert node._fusion.queued == 1
+
+
+def test_a_pose_on_set_pose_moves_the_estimate_there(fusion_node, collector_factory,
+                                                    make_node, executor):
+    node = fusion_node()
+    collector = collector_factory({"odometry/filtered": (Odometry, QoSProfile(depth=100))})
+    publisher = make_node("operator").create_publisher(PoseWithCovarianceStamped,
+                                                       "set_pose", 1)
+    assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10.0)
+    t0 = node.get_clock().now().nanoseconds
+    node._sensor_subscriptions[0].callback(odom(t0, 0.0, 0.0))
+    # As in the peer, set_pose moves an estimate: the filter has one once initialized.
+    assert spin_until(executor, lambda: node._fusion.initialized, 10.0)
+    publisher.publish(pose_stamped(t0 + 1, "odom", (4.0, -3.0, 0.0), 1.0))
+
+    def at_the_set_pose() -> bool:
+        poses = collector.messages["odometry/filtered"]
+        return bool(poses) and poses[-1].pose.pose.position.x == pytest.approx(4.0)
+
+    assert spin_until(executor, at_the_set_pose, 10.0)
+    last = collector.messages["odometry/filtered"][-1]
+    assert last.pose.pose.position.y == pytest.approx(-3.0)
+    q = last.pose.pose.orientation
+    assert 2.0 * math.atan2(q.z, q.w) == pytest.approx(1.0)
+    assert node._fusion.counts.applied["set_pose"] == 1

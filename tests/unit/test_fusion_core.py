@@ -516,3 +516,61 @@ def test_a_negative_or_zero_variance_is_taken_as_the_peer_takes_it(kind):
             x, p, np.array([1.5, 0.1, 0.2]), np.diag([0.04, 1e-9, 0.09]), measured)
         np.testing.assert_allclose(fusion.x, x_expected, atol=1e-9)
         np.testing.assert_allclose(fusion.p, p_expected, atol=1e-9)
+
+
+# --- set_pose ----------------------------------------------------------------------------
+
+def test_set_pose_puts_the_state_at_the_placed_pose_and_forgets_the_inputs_history():
+    config, sensor_inputs, fusion = pose_inputs(pose0_relative=True)
+    pose0 = config.sensors["pose0"]
+    for stamp in (1, 2):
+        sensor_inputs.add(pose0, pose_message(stamp, (5.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0),
+                                              np.eye(6) * 0.01), fusion)
+    fusion.update(1)                    # the second one stays queued
+    position, quaternion, covariance = (1.0, 2.0, 0.3), random_quaternion(), random_covariance()
+    assert sensor_inputs.set_pose(pose_message(10, position, quaternion, covariance,
+                                               "gps_origin"), fusion, now_ns=50)
+    placed = GPS_ORIGIN_TRANSFORM * rigid.Transform(position, quaternion)
+    expected_x = np.zeros(15)
+    expected_x[:3] = placed.translation
+    expected_x[3:6] = rpy_of(placed)
+    turn = np.kron(np.eye(2), GPS_ORIGIN.rotation)
+    expected_p = np.eye(15) * 1e-6
+    expected_p[:6, :6] = turn @ covariance @ turn.T
+    np.testing.assert_allclose(fusion.x, expected_x, atol=1e-9)
+    np.testing.assert_allclose(fusion.p, expected_p, atol=1e-9)
+    assert (fusion.queued, fusion.last_time_ns) == (0, 50)
+    # What is not later than the set pose is dropped; the first later pose is the new
+    # origin of the relative input.
+    assert sensor_inputs.add(pose0, pose_message(10, (7.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0),
+                                                 np.eye(6) * 0.01), fusion) == 0
+    assert sensor_inputs.dropped == {"pose0: not after the last set_pose": 1}
+    sensor_inputs.add(pose0, pose_message(11, (7.0, 0.0, 0.0), (0.0, 0.0, 0.0, 1.0),
+                                          np.eye(6) * 0.01), fusion)
+    np.testing.assert_allclose(queued(fusion)[0].z[:6], 0.0, atol=1e-12)
+
+
+def test_set_pose_in_two_d_mode_holds_the_plane_and_a_bad_one_changes_nothing():
+    config = fusion_config({"two_d_mode": True})
+    fusion = FusionFilter(config.settings)
+    sensor_inputs = config.sensor_inputs()
+    tilted = state.quaternion_from_rpy(0.3, 0.2, 1.0)
+    assert sensor_inputs.set_pose(pose_message(1, (1.0, 2.0, 3.0), tilted, np.eye(6) * 0.5),
+                                  fusion, now_ns=1)
+    expected_x = np.zeros(15)
+    expected_x[[state.X, state.Y, state.YAW]] = [1.0, 2.0, 1.0]
+    np.testing.assert_allclose(fusion.x, expected_x, atol=1e-9)
+    np.testing.assert_allclose(np.diag(fusion.p)[:6], [0.5, 0.5, 1e-6, 1e-6, 1e-6, 0.5])
+    x, p = fusion.x.copy(), fusion.p.copy()
+    indefinite = np.eye(6)
+    indefinite[0, 1] = indefinite[1, 0] = 2.0
+    assert not sensor_inputs.set_pose(pose_message(2, (9.0, 9.0, 0.0), tilted, indefinite),
+                                      fusion, now_ns=2)
+    assert not sensor_inputs.set_pose(pose_message(3, (9.0, 9.0, 0.0), tilted, np.eye(6),
+                                                   "nowhere"), fusion, now_ns=3)
+    np.testing.assert_array_equal(fusion.x, x)
+    np.testing.assert_array_equal(fusion.p, p)
+    assert sensor_inputs.dropped == {
+        "set_pose: a covariance that is not symmetric positive semi-definite": 1,
+        "set_pose: no transform from 'nowhere' to 'odom'": 1}
+    assert sensor_inputs.last_dropped == "set_pose: no transform from 'nowhere' to 'odom'"

@@ -64,6 +64,10 @@ class SensorConfig:
         return self.kind in ("odom", "twist") and any(self.update[TWIST])
 
 
+#: The name ``set_pose`` goes by in the counts.
+SET_POSE = "set_pose"
+
+
 def stamp_ns(header) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
@@ -81,15 +85,20 @@ class SensorInputs:
     #: ``two_d_mode``: every measurement also holds z, roll, pitch and their rates at 0.
     two_d: bool = False
     world_frame: str = "odom"
+    #: How many were dropped, by "<input part>: <reason>"; the latest reason.
     dropped: dict[str, int] = field(default_factory=dict)
+    last_dropped: str = ""
     _last: dict[str, int] = field(default_factory=dict)
     #: ``_relative``: each pose part's first pose.
     _initial: dict[str, Mount] = field(default_factory=dict)
     #: ``_differential``: each pose part's last pose, its time and covariance.
     _previous: dict[str, tuple[int, Mount, FloatArray]] = field(default_factory=dict)
+    #: The stamp of the last ``set_pose``: what is not later is dropped.
+    _set_pose_ns: int | None = None
 
     def _drop(self, reason: str) -> None:
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
+        self.last_dropped = reason
 
     def mount(self, frame_id: str) -> Mount | None:
         if frame_id in ("", self.base_frame):
@@ -131,6 +140,9 @@ class SensorInputs:
 
     def add(self, sensor: SensorConfig, msg, fusion: FusionFilter) -> int:
         """Queue the measurements of one message into ``fusion``; how many it queued."""
+        if self._set_pose_ns is not None and stamp_ns(msg.header) <= self._set_pose_ns:
+            self._drop(f"{sensor.name}: not after the last set_pose")
+            return 0
         made = []
         if sensor.kind == "imu":
             made = self._imu(sensor, msg, fusion)
@@ -140,47 +152,81 @@ class SensorInputs:
             made += self._twist(sensor, msg, fusion)
         if self.two_d:
             made = [inputs.force_two_d(measurement) for measurement in made]
-        queued = 0
-        for measurement in made:
-            problem = covariance_problem(measurement)
-            if problem:
-                self._drop(f"{measurement.source}: {problem}")
-                continue
+        usable = [measurement for measurement in made if self._usable(measurement)]
+        for measurement in usable:
             fusion.enqueue(measurement)
-            queued += 1
-        return queued
+        return len(usable)
+
+    def _usable(self, measurement: Measurement) -> bool:
+        problem = covariance_problem(measurement)
+        if problem:
+            self._drop(f"{measurement.source}: {problem}")
+        return problem is None
+
+    def set_pose(self, msg, fusion: FusionFilter, now_ns: int) -> bool:
+        """The peer's ``set_pose`` (a PoseWithCovarianceStamped): the filter takes the pose,
+        placed in the world, as its state (``FusionFilter.set_pose``); the inputs forget
+        their first and previous poses, and drop what is stamped at or before it. False
+        when the pose cannot be used (dropped and counted as any input)."""
+        read = self._read_pose(SET_POSE, msg)
+        frame = self._place(SET_POSE, msg.header.frame_id) if read else None
+        if read is None or frame is None:
+            return False
+        body, covariance = read
+        measurement = inputs.pose(stamp_ns(msg.header), body, covariance, (True,) * 6 +
+                                  (False,) * 9, frame, source=SET_POSE)
+        if measurement is not None and self.two_d:
+            measurement = inputs.force_two_d(measurement)
+        if measurement is None or not self._usable(measurement):
+            return False
+        fusion.set_pose(measurement, now_ns)
+        self._initial.clear()
+        self._previous.clear()
+        self._set_pose_ns = measurement.stamp_ns
+        return True
 
     def _pose(self, sensor: SensorConfig, msg) -> list[Measurement]:
         part = sensor.pose_part
-        stamp = stamp_ns(msg.header)
-        if not self._newer(part, stamp):
+        if not self._newer(part, stamp_ns(msg.header)):
             return []
+        read = self._read_pose(part, msg)
+        if read is None:
+            return []
+        body, covariance = read
+        if sensor.differential:
+            made = self._pose_change(sensor, part, stamp_ns(msg.header), body, covariance)
+        else:
+            frame = self._place(part, msg.header.frame_id)
+            if frame is None:
+                return []
+            if sensor.relative:
+                body = self._initial.setdefault(part, body).inverse() * body
+            made = inputs.pose(stamp_ns(msg.header), body, covariance, sensor.update, frame,
+                               sensor.pose_threshold, part)
+        return [made] if made else []
+
+    def _read_pose(self, part: str, msg) -> tuple[Mount, FloatArray] | None:
+        """The pose of a message with a pose (the robot's frame in the message's) and its
+        covariance; None, dropped and counted, when a number is not finite."""
         p = msg.pose.pose
         position = _vector(p.position)
         quaternion = (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
         if not (np.all(np.isfinite(position)) and all(map(math.isfinite, quaternion))):
             self._drop(f"{part}: a non-finite value")
-            return []
+            return None
         if not self._finite(part, msg.pose.covariance):
-            return []
-        covariance = np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6)
+            return None
         if not any(quaternion):
             # The peer's reading of an unset orientation: no rotation.
             quaternion = (0.0, 0.0, 0.0, 1.0)
-        body = Mount(rotation_from_quaternion(*quaternion), position)
-        if sensor.differential:
-            made = self._pose_change(sensor, part, stamp, body, covariance)
-        else:
-            frame = self.placement(msg.header.frame_id)
-            if frame is None:
-                self._drop(f"{part}: no transform from {msg.header.frame_id!r} to "
-                           f"{self.world_frame!r}")
-                return []
-            if sensor.relative:
-                body = self._initial.setdefault(part, body).inverse() * body
-            made = inputs.pose(stamp, body, covariance, sensor.update, frame,
-                               sensor.pose_threshold, part)
-        return [made] if made else []
+        return (Mount(rotation_from_quaternion(*quaternion), position),
+                np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6))
+
+    def _place(self, part: str, frame_id: str) -> Mount | None:
+        frame = self.placement(frame_id)
+        if frame is None:
+            self._drop(f"{part}: no transform from {frame_id!r} to {self.world_frame!r}")
+        return frame
 
     def _pose_change(self, sensor: SensorConfig, part: str, stamp: int, body: Mount,
                      covariance: FloatArray) -> Measurement | None:
