@@ -17,7 +17,9 @@ estimate goes on ``/tf`` too: ``odom -> base_link`` when ``world_frame`` is the 
 frame, ``map -> odom`` (through the tree's ``odom -> base_link`` at the estimate's time)
 when it is the map frame, stamped with the estimate's time plus
 ``transform_time_offset``. A pose on ``set_pose`` (geometry_msgs/PoseWithCovarianceStamped)
-puts the estimate there, as the peer's topic does. A clock that jumps back (a bag played
+puts the estimate there, as the peer's topic does. With ``print_diagnostics`` the node
+publishes ``/diagnostics`` every second: per input part the measurements applied, rejected
+by the Mahalanobis threshold and dropped, by reason. A clock that jumps back (a bag played
 again) resets the filter, as the peer does. A message with a non-finite value in what it
 feeds is dropped and counted, so nothing NaN is ever published.
 """
@@ -30,16 +32,18 @@ from collections.abc import Sequence
 import numpy as np
 from nav_msgs.msg import Odometry
 from geometry_msgs.msg import PoseWithCovarianceStamped, TwistWithCovarianceStamped
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Imu
 
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
-from estimation_nodes.core.fusion.sensors import SensorConfig
+from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
 from estimation_nodes.core.fusion.state import quaternion_from_rpy, rotation_from_quaternion
 from estimation_nodes.core.transforms.buffer import LookupFailed, TransformBuffer
 from estimation_nodes.core.transforms.rigid import Transform
+from estimation_nodes.nodes.diagnostics import status_array
 from estimation_nodes.nodes.parameters import ConfigurationError
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.tf import TransformBroadcaster, TransformListener, to_message
@@ -49,6 +53,8 @@ MESSAGE_TYPES = {"odom": Odometry, "pose": PoseWithCovarianceStamped,
                  "twist": TwistWithCovarianceStamped, "imu": Imu}
 #: This package's own parameters (beyond robot_localization's).
 SENSOR_MOUNTS = "sensor_mounts"
+#: Seconds between /diagnostics messages (the peer's diagnostic_updater period).
+DIAGNOSTICS_PERIOD = 1.0
 
 
 def parse_mounts(entries: Sequence[str]) -> dict[str, Mount]:
@@ -85,7 +91,6 @@ class FusionNode(Node):
         self._fusion = FusionFilter(self._config.settings)
         self._given_mounts = mounts
         self._inputs = self._config.sensor_inputs(mounts)
-        self.dropped_non_finite = 0
         self.resets = 0
         self._last_published_ns = -1
         self._publisher = self.create_publisher(Odometry, "odometry/filtered", 10)
@@ -99,6 +104,13 @@ class FusionNode(Node):
         self._set_pose_subscription = self.create_subscription(
             PoseWithCovarianceStamped, "set_pose", self._on_set_pose, 1)
         self._timer = self.create_timer(1.0 / self._config.frequency, self._on_timer)
+        #: The counts at the last /diagnostics, to say what went wrong since.
+        self._reported: dict[str, int] = {}
+        if self._config.print_diagnostics:
+            self._diagnostics_publisher = self.create_publisher(DiagnosticArray,
+                                                                "/diagnostics", 10)
+            self._diagnostics_timer = self.create_timer(DIAGNOSTICS_PERIOD,
+                                                        self._publish_diagnostics)
 
     def _subscribe(self, sensor):
         qos = QoSProfile(depth=max(1, sensor.queue_size),
@@ -106,7 +118,7 @@ class FusionNode(Node):
 
         def on_message(msg) -> None:
             if not _finite(msg, sensor):
-                self.dropped_non_finite += 1
+                self._inputs.drop(f"{sensor.name}: a non-finite value")
                 self.get_logger().warning(
                     f"{sensor.name} ({sensor.topic}): a non-finite value: message dropped",
                     throttle_duration_sec=5.0)
@@ -146,6 +158,18 @@ class FusionNode(Node):
                                    f"z {p.z:.3f} in {msg.header.frame_id!r}")
         else:
             self.get_logger().warning(f"not used: {self._inputs.last_dropped}")
+
+    def _publish_diagnostics(self) -> None:
+        """The counts per input part: applied, rejected by its Mahalanobis threshold,
+        dropped by reason; WARN with what was rejected or dropped since the last report."""
+        counts = measurement_counts(self._fusion, self._inputs)
+        problems = [f"{key}: {count - self._reported.get(key, 0)} since the last report"
+                    for key, count in counts.items()
+                    if not key.endswith(" applied") and count > self._reported.get(key, 0)]
+        self._reported = counts
+        values = {"initialized": self._fusion.initialized, "queued": self._fusion.queued,
+                  "resets": self.resets, **counts}
+        self._diagnostics_publisher.publish(status_array(self, "filter", values, problems))
 
     def _on_time_jump_back(self) -> None:
         """A clock that went back (a bag played again): start over, as the peer does."""
@@ -210,6 +234,20 @@ class FusionNode(Node):
         msg.pose.covariance = [float(v) for v in p[:6, :6].ravel()]
         msg.twist.covariance = [float(v) for v in p[6:12, 6:12].ravel()]
         return msg
+
+
+def measurement_counts(fusion: FusionFilter, inputs: SensorInputs) -> dict[str, int]:
+    """"<part> applied" and "<part> rejected" for each part that has reached the filter,
+    "<part> dropped: <reason>" for each reason a part was dropped for."""
+    counts = fusion.counts
+    values = {}
+    for source in sorted(set(counts.applied) | set(counts.rejected)):
+        values[f"{source} applied"] = counts.applied.get(source, 0)
+        values[f"{source} rejected"] = counts.rejected.get(source, 0)
+    for reason, count in sorted(inputs.dropped.items()):
+        part, _, why = reason.partition(": ")
+        values[f"{part} dropped: {why}"] = count
+    return values
 
 
 def _finite(msg, sensor: SensorConfig) -> bool:

@@ -64,6 +64,8 @@ class FusionConfig:
     transform_time_offset_ns: int = 0
     gravity: float = 9.80665
     two_d_mode: bool = False
+    #: Publish /diagnostics (the peer's ``print_diagnostics``, off by default as there).
+    print_diagnostics: bool = False
     unsupported: tuple[str, ...] = field(default_factory=tuple)
 
     def sensor_inputs(self, mounts: dict[str, Mount] | None = None) -> SensorInputs:
@@ -176,6 +178,7 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
         transform_time_offset_ns=_offset_ns(params),
         gravity=float(params.get("gravitational_acceleration", 9.80665)),
         two_d_mode=bool(params.get("two_d_mode", False)),
+        print_diagnostics=bool(params.get("print_diagnostics", False)),
         unsupported=tuple(unsupported))
 
 

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
@@ -84,7 +85,7 @@ def test_a_nan_reading_is_dropped_and_counted(fusion_node, context, executor):
     node = fusion_node()
     bad = odom(1_000_000_000, float("nan"), 0.0)
     node._sensor_subscriptions[0].callback(bad)
-    assert node.dropped_non_finite == 1
+    assert node._inputs.dropped == {"odom0: a non-finite value": 1}
     assert node._fusion.queued == 0
 
 
@@ -196,3 +197,30 @@ def test_a_pose_on_set_pose_moves_the_estimate_there(fusion_node, collector_fact
     q = last.pose.pose.orientation
     assert 2.0 * math.atan2(q.z, q.w) == pytest.approx(1.0)
     assert node._fusion.counts.applied["set_pose"] == 1
+
+
+def test_diagnostics_count_each_inputs_measurements_applied_rejected_and_dropped(
+        fusion_node, collector_factory, executor):
+    node = fusion_node(print_diagnostics=True, odom0_twist_rejection_threshold=2.0)
+    collector = collector_factory({"/diagnostics": (DiagnosticArray, 10)})
+    t0 = node.get_clock().now().nanoseconds - 1_000_000_000
+    on_odom = node._sensor_subscriptions[0].callback
+    on_odom(odom(t0, 1.0, 0.0))
+    on_odom(odom(t0 + 20_000_000, 50.0, 0.0))         # 49 m/s off: beyond 2 sigma
+    on_odom(odom(t0 + 10_000_000, 1.0, 0.0))          # older than the last one
+    on_odom(odom(t0 + 30_000_000, math.nan, 0.0))
+
+    def reported() -> dict[str, str]:
+        statuses = [status for msg in collector.messages["/diagnostics"]
+                    for status in msg.status]
+        return {v.key: v.value for v in statuses[-1].values} if statuses else {}
+
+    assert spin_until(executor, lambda: reported().get("odom0_twist rejected") == "1", 10.0)
+    values = reported()
+    assert {key: values[key] for key in values if key.startswith("odom0")} == {
+        "odom0_twist applied": "1", "odom0_twist rejected": "1",
+        "odom0_twist dropped: older than the last one": "1",
+        "odom0 dropped: a non-finite value": "1"}
+    status = collector.messages["/diagnostics"][-1].status[0]
+    assert status.level == DiagnosticStatus.WARN
+    assert "odom0_twist rejected: 1 since the last report" in status.message

@@ -96,7 +96,8 @@ class SensorInputs:
     #: The stamp of the last ``set_pose``: what is not later is dropped.
     _set_pose_ns: int | None = None
 
-    def _drop(self, reason: str) -> None:
+    def drop(self, reason: str) -> None:
+        """Count a message (or a part of one) dropped, by "<input part>: <reason>"."""
         self.dropped[reason] = self.dropped.get(reason, 0) + 1
         self.last_dropped = reason
 
@@ -128,12 +129,12 @@ class SensorInputs:
         rotation would spread a NaN to every entry, an inf would become NaNs)."""
         if all(map(math.isfinite, np.ravel(covariance))):
             return True
-        self._drop(f"{part}: a non-finite covariance")
+        self.drop(f"{part}: a non-finite covariance")
         return False
 
     def _newer(self, part: str, stamp: int) -> bool:
         if stamp < self._last.get(part, stamp):
-            self._drop(f"{part}: older than the last one")
+            self.drop(f"{part}: older than the last one")
             return False
         self._last[part] = stamp
         return True
@@ -141,7 +142,7 @@ class SensorInputs:
     def add(self, sensor: SensorConfig, msg, fusion: FusionFilter) -> int:
         """Queue the measurements of one message into ``fusion``; how many it queued."""
         if self._set_pose_ns is not None and stamp_ns(msg.header) <= self._set_pose_ns:
-            self._drop(f"{sensor.name}: not after the last set_pose")
+            self.drop(f"{sensor.name}: not after the last set_pose")
             return 0
         made = []
         if sensor.kind == "imu":
@@ -160,7 +161,7 @@ class SensorInputs:
     def _usable(self, measurement: Measurement) -> bool:
         problem = covariance_problem(measurement)
         if problem:
-            self._drop(f"{measurement.source}: {problem}")
+            self.drop(f"{measurement.source}: {problem}")
         return problem is None
 
     def set_pose(self, msg, fusion: FusionFilter, now_ns: int) -> bool:
@@ -212,7 +213,7 @@ class SensorInputs:
         position = _vector(p.position)
         quaternion = (p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
         if not (np.all(np.isfinite(position)) and all(map(math.isfinite, quaternion))):
-            self._drop(f"{part}: a non-finite value")
+            self.drop(f"{part}: a non-finite value")
             return None
         if not self._finite(part, msg.pose.covariance):
             return None
@@ -225,7 +226,7 @@ class SensorInputs:
     def _place(self, part: str, frame_id: str) -> Mount | None:
         frame = self.placement(frame_id)
         if frame is None:
-            self._drop(f"{part}: no transform from {frame_id!r} to {self.world_frame!r}")
+            self.drop(f"{part}: no transform from {frame_id!r} to {self.world_frame!r}")
         return frame
 
     def _pose_change(self, sensor: SensorConfig, part: str, stamp: int, body: Mount,
@@ -236,7 +237,7 @@ class SensorInputs:
             return None
         previous_stamp, previous_body, previous_covariance = previous
         if stamp == previous_stamp:
-            self._drop(f"{part}: at the time of the one before, no velocity to take")
+            self.drop(f"{part}: at the time of the one before, no velocity to take")
             return None
         return inputs.pose_change(stamp, previous_body, body, (stamp - previous_stamp) * 1e-9,
                                   covariance + previous_covariance, sensor.update,
@@ -247,7 +248,7 @@ class SensorInputs:
         frame = msg.child_frame_id if sensor.kind == "odom" else msg.header.frame_id
         mount = self.mount(frame)
         if mount is None:
-            self._drop(f"{sensor.name}: no transform from {frame!r} to {self.base_frame!r}")
+            self.drop(f"{sensor.name}: no transform from {frame!r} to {self.base_frame!r}")
             return []
         part = f"{sensor.name}_twist"
         if not (self._newer(part, stamp) and self._finite(part, msg.twist.covariance)):
@@ -263,7 +264,7 @@ class SensorInputs:
         stamp = stamp_ns(msg.header)
         mount = self.mount(msg.header.frame_id)
         if mount is None:
-            self._drop(f"{sensor.name}: no transform from {msg.header.frame_id!r} "
+            self.drop(f"{sensor.name}: no transform from {msg.header.frame_id!r} "
                        f"to {self.base_frame!r}")
             return []
         made: list[Measurement | None] = []
