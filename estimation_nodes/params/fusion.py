@@ -101,9 +101,8 @@ def _threshold(params: dict[str, Any], name: str) -> float:
     return value
 
 
-def _sensors(params: dict[str, Any]) -> tuple[dict[str, SensorConfig], list[str]]:
+def _sensors(params: dict[str, Any]) -> dict[str, SensorConfig]:
     sensors: dict[str, SensorConfig] = {}
-    unsupported: list[str] = []
     for kind in SENSOR_KINDS:
         index = 0
         while f"{kind}{index}" in params:
@@ -113,8 +112,6 @@ def _sensors(params: dict[str, Any]) -> tuple[dict[str, SensorConfig], list[str]
                 # The peer takes only a pose topic's pose entries.
                 update = tuple(flag and i < 6 for i, flag in enumerate(update))
             differential = bool(params.get(f"{name}_differential", False))
-            if differential and kind == "imu":
-                unsupported.append(f"{name}_differential")
             sensors[name] = SensorConfig(
                 name=name, kind=kind, topic=str(params[name]), update=update,
                 pose_threshold=_threshold(params, f"{name}_rejection_threshold"
@@ -129,10 +126,10 @@ def _sensors(params: dict[str, Any]) -> tuple[dict[str, SensorConfig], list[str]
                                                False)),
                 # Both set: the peer says so in an error line and takes the differential.
                 relative=bool(params.get(f"{name}_relative", False)) and not differential,
-                differential=differential and kind != "imu",
+                differential=differential,
                 queue_size=int(params.get(f"{name}_queue_size", 10)))
             index += 1
-    return sensors, unsupported
+    return sensors
 
 
 def _is_sensor_parameter(name: str, sensors: dict[str, SensorConfig]) -> bool:
@@ -147,10 +144,10 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
     if not frequency > 0:
         raise FusionConfigError("frequency: expected a positive rate in Hz")
     timeout = float(params.get("sensor_timeout", 1.0 / frequency))
-    sensors, unsupported = _sensors(params)
-    unsupported += sorted(name for name in params
-                          if name not in SUPPORTED | HARMLESS
-                          and not _is_sensor_parameter(name, sensors))
+    sensors = _sensors(params)
+    unsupported = sorted(name for name in params
+                         if name not in SUPPORTED | HARMLESS
+                         and not _is_sensor_parameter(name, sensors))
     initial_state = np.asarray(params.get("initial_state", [0.0] * STATE_SIZE), dtype=float)
     if initial_state.size != STATE_SIZE:
         raise FusionConfigError(f"initial_state: expected {STATE_SIZE} numbers")

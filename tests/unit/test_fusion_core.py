@@ -574,3 +574,73 @@ def test_set_pose_in_two_d_mode_holds_the_plane_and_a_bad_one_changes_nothing():
         "set_pose: a covariance that is not symmetric positive semi-definite": 1,
         "set_pose: no transform from 'nowhere' to 'odom'": 1}
     assert sensor_inputs.last_dropped == "set_pose: no transform from 'nowhere' to 'odom'"
+
+
+# --- an IMU's orientation: _relative and _differential ---------------------------------
+
+def imu_message(stamp_ns: int, quaternion, orientation_covariance, frame: str = "imu_link"
+                ) -> SimpleNamespace:
+    """A sensor_msgs/Imu by its field names, with orientation only."""
+    absent = [-1.0] + [0.0] * 8
+    return SimpleNamespace(
+        header=header(stamp_ns, frame),
+        orientation=SimpleNamespace(x=quaternion[0], y=quaternion[1], z=quaternion[2],
+                                    w=quaternion[3]),
+        orientation_covariance=list(np.ravel(orientation_covariance)),
+        angular_velocity=vector3((0.0, 0.0, 0.0)), angular_velocity_covariance=absent,
+        linear_acceleration=vector3((0.0, 0.0, 0.0)), linear_acceleration_covariance=absent)
+
+
+#: An IMU mounted turned a quarter to the left and tilted: its pitch is the robot's roll.
+IMU_MOUNT_RPY = (0.1, -0.05, math.pi / 2)
+#: Which way the mount's yaw turns roll and pitch: (roll, pitch) -> (-pitch, roll).
+IMU_TURN = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+
+
+def imu_attitude_by_hand(rpy) -> rigid.Transform:
+    """The peer's recipe, written out: the mount's angles off, the roll/pitch pair turned."""
+    offsets = [state.wrap(a - b) for a, b in zip(rpy, IMU_MOUNT_RPY)]
+    return rigid.Transform(rotation=state.quaternion_from_rpy(*(IMU_TURN @ offsets)))
+
+
+def imu_inputs(config_flags, **parameters):
+    config = fusion_config({"imu0": "imu", "imu0_config": [i in config_flags for i in range(15)],
+                            **parameters})
+    mounts = {"imu_link": inputs.Mount.from_rpy((0.0, -0.3, 0.5), IMU_MOUNT_RPY)}
+    return config, config.sensor_inputs(mounts), FusionFilter(config.settings)
+
+
+def test_a_relative_imu_measures_its_attitude_since_its_first_one():
+    config, sensor_inputs, fusion = imu_inputs((state.ROLL, state.PITCH, state.YAW),
+                                               imu0_relative=True)
+    first, later = (0.3, -0.2, 1.0), (0.35, -0.1, 1.4)
+    covariance = random_covariance(3)
+    for stamp, rpy in ((1, first), (2, later)):
+        sensor_inputs.add(config.sensors["imu0"], imu_message(
+            stamp, state.quaternion_from_rpy(*rpy), covariance), fusion)
+    at_first, at_later = queued(fusion)
+    np.testing.assert_allclose(at_first.z[3:6], 0.0, atol=1e-12)
+    expected = imu_attitude_by_hand(first).inverse() * imu_attitude_by_hand(later)
+    np.testing.assert_allclose(at_later.z[3:6], rpy_of(expected), atol=1e-9)
+    np.testing.assert_allclose(at_later.covariance[3:6, 3:6],
+                               IMU_TURN @ covariance @ IMU_TURN.T, atol=1e-12)
+
+
+def test_a_differential_imu_measures_the_rates_between_two_attitudes():
+    # Roll and yaw configured: the mount's quarter turn makes them pitch and yaw rates.
+    config, sensor_inputs, fusion = imu_inputs((state.X, state.ROLL, state.YAW),
+                                               imu0_differential=True,
+                                               imu0_pose_rejection_threshold=4.0)
+    assert config.unsupported == ()
+    first, later = (0.3, -0.2, 1.0), (0.32, -0.17, 1.1)
+    c1, c2 = random_covariance(3), random_covariance(3)
+    for stamp, rpy, covariance in ((0, first, c1), (100_000_000, later, c2)):
+        sensor_inputs.add(config.sensors["imu0"], imu_message(
+            stamp, state.quaternion_from_rpy(*rpy), covariance), fusion)
+    (measured,) = queued(fusion)
+    change = imu_attitude_by_hand(first).inverse() * imu_attitude_by_hand(later)
+    assert measured.indices == (state.VPITCH, state.VYAW)
+    assert (measured.source, measured.threshold) == ("imu0_pose", 4.0)
+    np.testing.assert_allclose(measured.z[9:12], np.array(rpy_of(change)) / 0.1, atol=1e-9)
+    np.testing.assert_allclose(measured.covariance[9:12, 9:12],
+                               IMU_TURN @ (c1 + c2) @ IMU_TURN.T * 0.1, atol=1e-12)

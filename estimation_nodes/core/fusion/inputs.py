@@ -10,9 +10,9 @@ that the mount turns into another one measures that one.
 - ``pose_change``: two consecutive poses as the velocity that moves one to the other
   (``_differential``), with the peer's covariance (R_previous + R_current) dt.
 - ``twist``: linear and angular velocity; v_base = R v + o x omega_state.
-- ``imu_orientation``: an IMU reports its attitude in the world frame, so only the
-  mount's angles are taken off (roll, pitch and yaw minus the mount's, the roll/pitch
-  pair turned by the mount's yaw), not a frame change.
+- ``imu_attitude``, ``imu_orientation``: an IMU reports its attitude in the world frame,
+  so only the mount's angles are taken off (roll, pitch and yaw minus the mount's, the
+  roll/pitch pair turned by the mount's yaw), not a frame change.
 - ``acceleration``: gravity (0, 0, g) seen in the sensor's frame (through the sensor's
   world attitude) taken off when asked, then a_base = R a + o x alpha - (o x omega) x
   omega. (The peer's ROS 2 branch takes gravity off after the rotation into the
@@ -30,8 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimation_nodes.core.fusion.state import (
-    ACCELERATION, AX, AZ, PITCH, POSE, ROLL, STATE_SIZE, TWIST, VPITCH, VROLL, VX, VZ, X, Z,
-    rotation_from_quaternion, rotation_from_rpy, rpy_from_rotation, wrap)
+    ACCELERATION, AX, AZ, ORIENTATION, PITCH, POSE, ROLL, STATE_SIZE, TWIST, VPITCH, VROLL,
+    VX, VZ, X, Z, rotation_from_quaternion, rotation_from_rpy, rpy_from_rotation, wrap)
 from estimation_nodes.core.fusion.steps import Measurement
 from estimation_nodes.core.validation import FloatArray
 
@@ -132,15 +132,21 @@ def pose(stamp_ns: int, body: Mount, covariance6: FloatArray, update: tuple[bool
 
 def pose_change(stamp_ns: int, previous: Mount, current: Mount, dt: float,
                 covariance6: FloatArray, update: tuple[bool, ...], threshold: float = math.inf,
-                source: str = "") -> Measurement | None:
+                source: str = "", turn: FloatArray | None = None) -> Measurement | None:
     """Two consecutive poses ``dt`` apart as the twist that moves ``previous`` to ``current``
     (the peer's ``_differential``): the change previous^-1 current, in the previous pose's
     frame, over dt: its translation / dt and its roll, pitch, yaw / dt.
 
     ``covariance6`` is the sum of the two poses' covariances; the twist's is that times dt,
-    as the peer has it. The pose entries of ``update`` say which rates are measured.
+    as the peer has it. The pose entries of ``update`` say which rates are measured. An
+    IMU's ``turn`` (``imu_turn``) turns the mask and the covariance, as for its attitude.
     """
     change = previous.inverse() * current
+    if turn is not None:
+        rot6 = _block_rotation(turn)
+        covariance6 = rot6 @ covariance6 @ rot6.T
+        update = (*_masked(turn, tuple(update[X:X + 3])),
+                  *_masked(turn, tuple(update[ROLL:ROLL + 3])))
     twist_update = [False] * STATE_SIZE
     twist_update[TWIST] = update[POSE]
     return twist(stamp_ns, change.origin / dt,
@@ -148,17 +154,30 @@ def pose_change(stamp_ns: int, previous: Mount, current: Mount, dt: float,
                  tuple(twist_update), np.zeros(3), IDENTITY, threshold, source)
 
 
-def imu_orientation(stamp_ns: int, quaternion: tuple[float, float, float, float],
-                    covariance3: FloatArray, update: tuple[bool, ...], mount: Mount = IDENTITY,
-                    threshold: float = math.inf, source: str = "") -> Measurement | None:
-    """An IMU's attitude (x, y, z, w, in the world frame) as a roll/pitch/yaw measurement."""
+def imu_turn(mount: Mount) -> FloatArray:
+    """The mount's yaw alone: what turns an IMU's roll and pitch, their mask and their
+    covariance into the robot's (a sideways IMU's pitch is the robot's roll)."""
+    return rotation_from_rpy(0.0, 0.0, rpy_from_rotation(mount.rotation)[2])
+
+
+def imu_attitude(quaternion: tuple[float, float, float, float], mount: Mount) -> FloatArray:
+    """An IMU's attitude (x, y, z, w, in the world frame) as the robot's, a rotation: the
+    mount's angles taken off (roll, pitch and yaw minus the mount's), the roll/pitch pair
+    turned by the mount's yaw, as the peer does (not a frame change)."""
     roll0, pitch0, yaw0 = rpy_from_rotation(mount.rotation)
-    turn = rotation_from_rpy(0.0, 0.0, yaw0)
     roll, pitch, yaw = rpy_from_rotation(rotation_from_quaternion(*quaternion))
     offsets = np.array([wrap(roll - roll0), wrap(pitch - pitch0), wrap(yaw - yaw0)])
-    angles = rpy_from_rotation(rotation_from_rpy(*(turn @ offsets)))
+    return rotation_from_rpy(*(imu_turn(mount) @ offsets))
+
+
+def imu_orientation(stamp_ns: int, attitude: FloatArray, covariance3: FloatArray,
+                    update: tuple[bool, ...], mount: Mount = IDENTITY,
+                    threshold: float = math.inf, source: str = "") -> Measurement | None:
+    """An IMU's attitude (``imu_attitude``, maybe relative to its first) as a roll, pitch,
+    yaw measurement; its covariance and mask turned by the mount's yaw."""
+    turn = imu_turn(mount)
     z = np.zeros(STATE_SIZE)
-    z[ROLL:ROLL + 3] = angles
+    z[ROLL:ROLL + 3] = rpy_from_rotation(attitude)
     covariance6 = np.zeros((6, 6))
     covariance6[3:, 3:] = covariance3
     rot6 = _block_rotation(turn)
@@ -166,8 +185,7 @@ def imu_orientation(stamp_ns: int, quaternion: tuple[float, float, float, float]
     covariance[POSE, POSE] = rot6 @ covariance6 @ rot6.T
     mask = list(update)
     mask[ROLL:ROLL + 3] = _masked(turn, tuple(update[ROLL:ROLL + 3]))
-    return _measurement(stamp_ns, z, covariance, _only(mask, slice(ROLL, ROLL + 3)),
-                        threshold, source)
+    return _measurement(stamp_ns, z, covariance, _only(mask, ORIENTATION), threshold, source)
 
 
 def acceleration(stamp_ns: int, linear: FloatArray, covariance3: FloatArray,

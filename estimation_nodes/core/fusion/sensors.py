@@ -27,7 +27,7 @@ import numpy as np
 from estimation_nodes.core.fusion import inputs
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
-from estimation_nodes.core.fusion.state import POSE, ROLL, TWIST, VROLL, \
+from estimation_nodes.core.fusion.state import ORIENTATION, POSE, ROLL, TWIST, VROLL, \
     rotation_from_quaternion, rotation_from_rpy
 from estimation_nodes.core.fusion.steps import Measurement, covariance_problem
 from estimation_nodes.core.validation import FloatArray
@@ -230,7 +230,8 @@ class SensorInputs:
         return frame
 
     def _pose_change(self, sensor: SensorConfig, part: str, stamp: int, body: Mount,
-                     covariance: FloatArray) -> Measurement | None:
+                     covariance: FloatArray, turn: FloatArray | None = None
+                     ) -> Measurement | None:
         previous = self._previous.get(part)
         self._previous[part] = (stamp, body, covariance)
         if previous is None:
@@ -240,8 +241,9 @@ class SensorInputs:
             self.drop(f"{part}: at the time of the one before, no velocity to take")
             return None
         return inputs.pose_change(stamp, previous_body, body, (stamp - previous_stamp) * 1e-9,
-                                  covariance + previous_covariance, sensor.update,
-                                  sensor.pose_threshold, part)
+                                  covariance + previous_covariance,
+                                  _entries(sensor.update, POSE if turn is None else ORIENTATION),
+                                  sensor.pose_threshold, part, turn)
 
     def _twist(self, sensor: SensorConfig, msg, fusion: FusionFilter) -> list[Measurement]:
         stamp = stamp_ns(msg.header)
@@ -265,7 +267,7 @@ class SensorInputs:
         mount = self.mount(msg.header.frame_id)
         if mount is None:
             self.drop(f"{sensor.name}: no transform from {msg.header.frame_id!r} "
-                       f"to {self.base_frame!r}")
+                      f"to {self.base_frame!r}")
             return []
         made: list[Measurement | None] = []
         has_orientation = abs(msg.orientation_covariance[0] + 1.0) >= 1e-9
@@ -274,9 +276,8 @@ class SensorInputs:
         if any(sensor.update[POSE.start + 3:POSE.stop]) and has_orientation \
                 and self._newer(f"{sensor.name}_pose", stamp) \
                 and self._finite(f"{sensor.name}_pose", msg.orientation_covariance):
-            made.append(inputs.imu_orientation(
-                stamp, quaternion, _matrix3(msg.orientation_covariance), sensor.update,
-                mount, sensor.pose_threshold, f"{sensor.name}_pose"))
+            made.append(self._imu_attitude(sensor, stamp, quaternion,
+                                           _matrix3(msg.orientation_covariance), mount))
         if any(sensor.update[VROLL:VROLL + 3]) \
                 and abs(msg.angular_velocity_covariance[0] + 1.0) >= 1e-9 \
                 and self._newer(f"{sensor.name}_twist", stamp) \
@@ -285,7 +286,8 @@ class SensorInputs:
             covariance[3:, 3:] = _matrix3(msg.angular_velocity_covariance)
             made.append(inputs.twist(
                 stamp, np.zeros(3), _vector(msg.angular_velocity), covariance,
-                _rates_only(sensor.update), fusion.x[VROLL:VROLL + 3], mount,
+                _entries(sensor.update, slice(VROLL, VROLL + 3)), fusion.x[VROLL:VROLL + 3],
+                mount,
                 sensor.twist_threshold, f"{sensor.name}_twist"))
         if any(sensor.update[12:15]) \
                 and abs(msg.linear_acceleration_covariance[0] + 1.0) >= 1e-9 \
@@ -300,6 +302,23 @@ class SensorInputs:
                 sensor.remove_gravity, self.gravity, mount, sensor.acceleration_threshold,
                 f"{sensor.name}_acceleration"))
         return [m for m in made if m is not None]
+
+    def _imu_attitude(self, sensor: SensorConfig, stamp: int, quaternion, covariance3: FloatArray,
+                      mount: Mount) -> Measurement | None:
+        """An IMU's attitude part, taken as the peer takes an IMU's orientation, as a pose:
+        as it is, relative to the first one (``_relative``), or the rates between two
+        (``_differential``)."""
+        part = f"{sensor.name}_pose"
+        attitude = Mount(inputs.imu_attitude(quaternion, mount))
+        if sensor.differential:
+            covariance = np.zeros((6, 6))
+            covariance[3:, 3:] = covariance3
+            return self._pose_change(sensor, part, stamp, attitude, covariance,
+                                     inputs.imu_turn(mount))
+        if sensor.relative:
+            attitude = self._initial.setdefault(part, attitude).inverse() * attitude
+        return inputs.imu_orientation(stamp, attitude.rotation, covariance3, sensor.update,
+                                      mount, sensor.pose_threshold, part)
 
     @staticmethod
     def _attitude(sensor: SensorConfig, has_orientation: bool, quaternion, mount: Mount,
@@ -318,6 +337,7 @@ def _matrix3(values) -> np.ndarray:
     return np.asarray(values, dtype=float).reshape(3, 3)
 
 
-def _rates_only(update: tuple[bool, ...]) -> tuple[bool, ...]:
-    """An IMU's twist part: its angular rates (it has no linear velocity)."""
-    return tuple(flag and VROLL <= i < VROLL + 3 for i, flag in enumerate(update))
+def _entries(update: tuple[bool, ...], part: slice) -> tuple[bool, ...]:
+    """The update mask with only ``part``'s entries left: an IMU has no position and no
+    linear velocity."""
+    return tuple(flag and part.start <= i < part.stop for i, flag in enumerate(update))
