@@ -4,19 +4,24 @@ they are, over the package's fusion core.
 Every parameter the file gives is taken (the node declares them from the overrides, as
 the peer's inputs odom0, odom1, ... are open-ended) and read with the peer's names and
 meanings (params/fusion.py); one the core does not act on yet is one warning line naming
-it. The inputs ``odomN`` (nav_msgs/Odometry), ``twistN``
+it. The inputs ``odomN`` (nav_msgs/Odometry), ``poseN``
+(geometry_msgs/PoseWithCovarianceStamped), ``twistN``
 (geometry_msgs/TwistWithCovarianceStamped) and ``imuN`` (sensor_msgs/Imu) are queued as
 they come; a timer at ``frequency`` on the node's clock (``/clock`` with
 ``use_sim_time``) runs the periodic update and publishes ``odometry/filtered``. A sensor
-frame other than ``base_link_frame`` needs its mount: ``sensor_mounts`` (this package's
-parameter, ["FRAME=x,y,z,roll,pitch,yaw", ...]) gives it, else the transform tree
-(``/tf_static``, ``/tf``: nodes/tf.py) at the message's time. With ``publish_tf`` the
+frame other than ``base_link_frame`` needs its mount, and a pose's frame other than
+``world_frame`` its place in the world: ``sensor_mounts`` (this package's parameter,
+["FRAME=x,y,z,roll,pitch,yaw", ...]) gives them, else the transform tree (``/tf_static``,
+``/tf``: nodes/tf.py) at the message's time. With ``publish_tf`` the
 estimate goes on ``/tf`` too: ``odom -> base_link`` when ``world_frame`` is the odom
 frame, ``map -> odom`` (through the tree's ``odom -> base_link`` at the estimate's time)
 when it is the map frame, stamped with the estimate's time plus
-``transform_time_offset``. A clock that jumps back (a bag played again) resets the
-filter, as the peer does. A message with a non-finite value in what it feeds is dropped
-and counted, so nothing NaN is ever published.
+``transform_time_offset``. A pose on ``set_pose`` (geometry_msgs/PoseWithCovarianceStamped)
+puts the estimate there, as the peer's topic does. With ``print_diagnostics`` the node
+publishes ``/diagnostics`` every second: per input part the measurements applied, rejected
+by the Mahalanobis threshold and dropped, by reason. A clock that jumps back (a bag played
+again) resets the filter, as the peer does. A message with a non-finite value in what it
+feeds is dropped and counted, so nothing NaN is ever published.
 """
 
 from __future__ import annotations
@@ -26,29 +31,35 @@ from collections.abc import Sequence
 
 import numpy as np
 from nav_msgs.msg import Odometry
-from geometry_msgs.msg import TwistWithCovarianceStamped
+from geometry_msgs.msg import PoseWithCovarianceStamped, TwistWithCovarianceStamped
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Imu
 
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
-from estimation_nodes.core.fusion.sensors import SensorInputs
+from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
 from estimation_nodes.core.fusion.state import quaternion_from_rpy, rotation_from_quaternion
 from estimation_nodes.core.transforms.buffer import LookupFailed, TransformBuffer
 from estimation_nodes.core.transforms.rigid import Transform
+from estimation_nodes.nodes.diagnostics import status_array
 from estimation_nodes.nodes.parameters import ConfigurationError
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.tf import TransformBroadcaster, TransformListener, to_message
 from estimation_nodes.params.fusion import FusionConfigError, fusion_config
 
-MESSAGE_TYPES = {"odom": Odometry, "twist": TwistWithCovarianceStamped, "imu": Imu}
+MESSAGE_TYPES = {"odom": Odometry, "pose": PoseWithCovarianceStamped,
+                 "twist": TwistWithCovarianceStamped, "imu": Imu}
 #: This package's own parameters (beyond robot_localization's).
 SENSOR_MOUNTS = "sensor_mounts"
+#: Seconds between /diagnostics messages (the peer's diagnostic_updater period).
+DIAGNOSTICS_PERIOD = 1.0
 
 
 def parse_mounts(entries: Sequence[str]) -> dict[str, Mount]:
-    """``FRAME=x,y,z,roll,pitch,yaw`` entries (m, rad) as mounts by frame."""
+    """``FRAME=x,y,z,roll,pitch,yaw`` entries (m, rad) as mounts by frame: a sensor frame's
+    pose on the robot, or a pose input's frame's pose in the world frame."""
     mounts = {}
     for entry in entries:
         frame, _, numbers = entry.partition("=")
@@ -79,9 +90,7 @@ class FusionNode(Node):
             self.get_logger().warning(f"parameter {name} is not supported yet: ignored")
         self._fusion = FusionFilter(self._config.settings)
         self._given_mounts = mounts
-        self._inputs = SensorInputs(dict(self._config.sensors), dict(mounts),
-                                    self._config.base_link_frame, self._config.gravity)
-        self.dropped_non_finite = 0
+        self._inputs = self._config.sensor_inputs(mounts)
         self.resets = 0
         self._last_published_ns = -1
         self._publisher = self.create_publisher(Odometry, "odometry/filtered", 10)
@@ -92,37 +101,46 @@ class FusionNode(Node):
         # Not self._subscriptions: that is rclpy's own list of the node's subscriptions.
         self._sensor_subscriptions = [self._subscribe(sensor)
                                       for sensor in self._config.sensors.values()]
+        self._set_pose_subscription = self.create_subscription(
+            PoseWithCovarianceStamped, "set_pose", self._on_set_pose, 1)
         self._timer = self.create_timer(1.0 / self._config.frequency, self._on_timer)
+        #: The counts at the last /diagnostics, to say what went wrong since.
+        self._reported: dict[str, int] = {}
+        if self._config.print_diagnostics:
+            self._diagnostics_publisher = self.create_publisher(DiagnosticArray,
+                                                                "/diagnostics", 10)
+            self._diagnostics_timer = self.create_timer(DIAGNOSTICS_PERIOD,
+                                                        self._publish_diagnostics)
 
     def _subscribe(self, sensor):
         qos = QoSProfile(depth=max(1, sensor.queue_size),
                          reliability=qos_profile_sensor_data.reliability)
 
         def on_message(msg) -> None:
-            if not _finite(msg):
-                self.dropped_non_finite += 1
+            if not _finite(msg, sensor):
+                self._inputs.drop(f"{sensor.name}: a non-finite value")
                 self.get_logger().warning(
                     f"{sensor.name} ({sensor.topic}): a non-finite value: message dropped",
                     throttle_duration_sec=5.0)
                 return
-            self._mount_from_tf(msg.child_frame_id if sensor.kind == "odom"
-                                else msg.header.frame_id, msg.header.stamp)
+            for parent, frame in self._inputs.frames(sensor, msg):
+                self._mount_from_tf(parent, frame, msg.header.stamp)
             self._inputs.add(sensor, msg, self._fusion)
 
         return self.create_subscription(MESSAGE_TYPES[sensor.kind], sensor.topic,
                                         on_message, qos)
 
-    def _mount_from_tf(self, frame: str, stamp) -> None:
-        """The sensor frame's mount from the tree, unless ``sensor_mounts`` gives it; left
-        unknown (the message is then dropped and counted) when the tree cannot say."""
-        if frame in ("", self._config.base_link_frame) or frame in self._given_mounts:
+    def _mount_from_tf(self, parent: str, frame: str, stamp) -> None:
+        """``frame``'s mount in ``parent`` from the tree, unless ``sensor_mounts`` gives it;
+        left unknown (the message is then dropped and counted) when the tree cannot say."""
+        if frame in ("", parent) or frame in self._given_mounts:
             return
         time_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
         try:
             try:
-                t = self.tf_buffer.lookup(self._config.base_link_frame, frame, time_ns)
+                t = self.tf_buffer.lookup(parent, frame, time_ns)
             except LookupFailed:
-                t = self.tf_buffer.lookup(self._config.base_link_frame, frame)
+                t = self.tf_buffer.lookup(parent, frame)
         except LookupFailed as error:
             self._inputs.mounts.pop(frame, None)
             self.get_logger().warning(f"no mount for {frame!r}: {error}",
@@ -131,11 +149,32 @@ class FusionNode(Node):
         self._inputs.mounts[frame] = Mount(rotation_from_quaternion(*t.rotation),
                                            np.asarray(t.translation, dtype=float))
 
+    def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        """The estimate put at the pose (the peer's set_pose topic)."""
+        self._mount_from_tf(self._config.world_frame, msg.header.frame_id, msg.header.stamp)
+        if self._inputs.set_pose(msg, self._fusion, self.get_clock().now().nanoseconds):
+            p = msg.pose.pose.position
+            self.get_logger().info(f"set_pose: the estimate is at x {p.x:.3f} y {p.y:.3f} "
+                                   f"z {p.z:.3f} in {msg.header.frame_id!r}")
+        else:
+            self.get_logger().warning(f"not used: {self._inputs.last_dropped}")
+
+    def _publish_diagnostics(self) -> None:
+        """The counts per input part: applied, rejected by its Mahalanobis threshold,
+        dropped by reason; WARN with what was rejected or dropped since the last report."""
+        counts = measurement_counts(self._fusion, self._inputs)
+        problems = [f"{key}: {count - self._reported.get(key, 0)} since the last report"
+                    for key, count in counts.items()
+                    if not key.endswith(" applied") and count > self._reported.get(key, 0)]
+        self._reported = counts
+        values = {"initialized": self._fusion.initialized, "queued": self._fusion.queued,
+                  "resets": self.resets, **counts}
+        self._diagnostics_publisher.publish(status_array(self, "filter", values, problems))
+
     def _on_time_jump_back(self) -> None:
         """A clock that went back (a bag played again): start over, as the peer does."""
         self._fusion.reset()
-        self._inputs = SensorInputs(dict(self._config.sensors), dict(self._given_mounts),
-                                    self._config.base_link_frame, self._config.gravity)
+        self._inputs = self._config.sensor_inputs(self._given_mounts)
         self._last_published_ns = -1
         self.resets += 1
         self.get_logger().warning("time jumped back: the filter was reset")
@@ -197,7 +236,21 @@ class FusionNode(Node):
         return msg
 
 
-def _finite(msg) -> bool:
+def measurement_counts(fusion: FusionFilter, inputs: SensorInputs) -> dict[str, int]:
+    """"<part> applied" and "<part> rejected" for each part that has reached the filter,
+    "<part> dropped: <reason>" for each reason a part was dropped for."""
+    counts = fusion.counts
+    values = {}
+    for source in sorted(set(counts.applied) | set(counts.rejected)):
+        values[f"{source} applied"] = counts.applied.get(source, 0)
+        values[f"{source} rejected"] = counts.rejected.get(source, 0)
+    for reason, count in sorted(inputs.dropped.items()):
+        part, _, why = reason.partition(": ")
+        values[f"{part} dropped: {why}"] = count
+    return values
+
+
+def _finite(msg, sensor: SensorConfig) -> bool:
     """Whether every number the fusion may read of ``msg`` is finite."""
     if isinstance(msg, Imu):
         values = [msg.orientation.x, msg.orientation.y, msg.orientation.z, msg.orientation.w,
@@ -205,10 +258,15 @@ def _finite(msg) -> bool:
                   msg.linear_acceleration.x, msg.linear_acceleration.y,
                   msg.linear_acceleration.z, *msg.orientation_covariance,
                   *msg.angular_velocity_covariance, *msg.linear_acceleration_covariance]
-    else:
+        return all(math.isfinite(v) for v in values)
+    values = []
+    if sensor.measures_pose:
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        values += [p.x, p.y, p.z, q.x, q.y, q.z, q.w, *msg.pose.covariance]
+    if sensor.measures_twist:
         t = msg.twist.twist
-        values = [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z,
-                  *msg.twist.covariance]
+        values += [t.linear.x, t.linear.y, t.linear.z, t.angular.x, t.angular.y, t.angular.z,
+                   *msg.twist.covariance]
     return all(math.isfinite(v) for v in values)
 
 

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from estimation_nodes.core.fusion.filter import FusionSettings
-from estimation_nodes.core.fusion.sensors import SensorConfig
+from estimation_nodes.core.fusion.inputs import Mount
+from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
 from estimation_nodes.core.fusion.state import STATE_SIZE
 from estimation_nodes.core.fusion.steps import UnscentedWeights
 
@@ -29,12 +30,18 @@ SUPPORTED = {
 }
 #: Parameters that change nothing a run computes (logging, the peer's launch helpers).
 HARMLESS = {"clear_params", "debug", "debug_out_file"}
-SENSOR_KINDS = ("odom", "twist", "imu")
-#: Per-sensor suffixes read and acted on.
+SENSOR_KINDS = ("odom", "pose", "twist", "imu")
+_TOPIC = {"", "_config", "_queue_size"}
+#: Per-input suffixes read and acted on, by kind: the peer's names (a pose or twist
+#: topic has one ``_rejection_threshold``, an odometry or IMU one per part).
 SENSOR_SUFFIXES = {
-    "", "_config", "_queue_size", "_differential", "_relative",
-    "_remove_gravitational_acceleration", "_pose_rejection_threshold",
-    "_twist_rejection_threshold", "_linear_acceleration_rejection_threshold",
+    "odom": _TOPIC | {"_differential", "_relative", "_pose_rejection_threshold",
+                      "_twist_rejection_threshold"},
+    "pose": _TOPIC | {"_differential", "_relative", "_rejection_threshold"},
+    "twist": _TOPIC | {"_rejection_threshold"},
+    "imu": _TOPIC | {"_differential", "_relative", "_remove_gravitational_acceleration",
+                     "_pose_rejection_threshold", "_twist_rejection_threshold",
+                     "_linear_acceleration_rejection_threshold"},
 }
 
 
@@ -56,7 +63,15 @@ class FusionConfig:
     #: ``transform_time_offset``, s).
     transform_time_offset_ns: int = 0
     gravity: float = 9.80665
+    two_d_mode: bool = False
+    #: Publish /diagnostics (the peer's ``print_diagnostics``, off by default as there).
+    print_diagnostics: bool = False
     unsupported: tuple[str, ...] = field(default_factory=tuple)
+
+    def sensor_inputs(self, mounts: dict[str, Mount] | None = None) -> SensorInputs:
+        """The inputs of this configuration, with the mounts known so far by frame."""
+        return SensorInputs(dict(self.sensors), dict(mounts or {}), self.base_link_frame,
+                            self.gravity, two_d=self.two_d_mode, world_frame=self.world_frame)
 
 
 def _matrix(params: dict[str, Any], name: str, default: np.ndarray) -> np.ndarray:
@@ -86,36 +101,40 @@ def _threshold(params: dict[str, Any], name: str) -> float:
     return value
 
 
-def _sensors(params: dict[str, Any]) -> tuple[dict[str, SensorConfig], list[str]]:
+def _sensors(params: dict[str, Any]) -> dict[str, SensorConfig]:
     sensors: dict[str, SensorConfig] = {}
-    unsupported: list[str] = []
     for kind in SENSOR_KINDS:
         index = 0
         while f"{kind}{index}" in params:
             name = f"{kind}{index}"
             update = _update_vector(params, name)
-            if kind == "odom" and any(update[:6]):
-                unsupported.append(f"{name}_config (pose entries: only the twist is fused)")
-            if params.get(f"{name}_differential", False):
-                unsupported.append(f"{name}_differential")
+            if kind == "pose":
+                # The peer takes only a pose topic's pose entries.
+                update = tuple(flag and i < 6 for i, flag in enumerate(update))
+            differential = bool(params.get(f"{name}_differential", False))
             sensors[name] = SensorConfig(
-                name=name, kind=kind, topic=str(params[name]),
-                update=update if kind != "odom" else tuple(
-                    flag and i >= 6 for i, flag in enumerate(update)),
-                pose_threshold=_threshold(params, f"{name}_pose_rejection_threshold"),
-                twist_threshold=_threshold(params, f"{name}_twist_rejection_threshold"),
+                name=name, kind=kind, topic=str(params[name]), update=update,
+                pose_threshold=_threshold(params, f"{name}_rejection_threshold"
+                                          if kind == "pose" else
+                                          f"{name}_pose_rejection_threshold"),
+                twist_threshold=_threshold(params, f"{name}_rejection_threshold"
+                                           if kind == "twist" else
+                                           f"{name}_twist_rejection_threshold"),
                 acceleration_threshold=_threshold(
                     params, f"{name}_linear_acceleration_rejection_threshold"),
                 remove_gravity=bool(params.get(f"{name}_remove_gravitational_acceleration",
                                                False)),
-                relative=bool(params.get(f"{name}_relative", False)),
+                # Both set: the peer says so in an error line and takes the differential.
+                relative=bool(params.get(f"{name}_relative", False)) and not differential,
+                differential=differential,
                 queue_size=int(params.get(f"{name}_queue_size", 10)))
             index += 1
-    return sensors, unsupported
+    return sensors
 
 
 def _is_sensor_parameter(name: str, sensors: dict[str, SensorConfig]) -> bool:
-    return any(name == sensor + suffix for sensor in sensors for suffix in SENSOR_SUFFIXES)
+    return any(name == sensor + suffix for sensor, config in sensors.items()
+               for suffix in SENSOR_SUFFIXES[config.kind])
 
 
 def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConfig:
@@ -125,12 +144,10 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
     if not frequency > 0:
         raise FusionConfigError("frequency: expected a positive rate in Hz")
     timeout = float(params.get("sensor_timeout", 1.0 / frequency))
-    sensors, unsupported = _sensors(params)
-    if params.get("two_d_mode", False):
-        unsupported.append("two_d_mode")
-    unsupported += sorted(name for name in params
-                          if name not in SUPPORTED | HARMLESS
-                          and not _is_sensor_parameter(name, sensors))
+    sensors = _sensors(params)
+    unsupported = sorted(name for name in params
+                         if name not in SUPPORTED | HARMLESS
+                         and not _is_sensor_parameter(name, sensors))
     initial_state = np.asarray(params.get("initial_state", [0.0] * STATE_SIZE), dtype=float)
     if initial_state.size != STATE_SIZE:
         raise FusionConfigError(f"initial_state: expected {STATE_SIZE} numbers")
@@ -157,6 +174,8 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
         publish_tf=bool(params.get("publish_tf", True)),
         transform_time_offset_ns=_offset_ns(params),
         gravity=float(params.get("gravitational_acceleration", 9.80665)),
+        two_d_mode=bool(params.get("two_d_mode", False)),
+        print_diagnostics=bool(params.get("print_diagnostics", False)),
         unsupported=tuple(unsupported))
 
 

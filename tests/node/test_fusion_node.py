@@ -1,5 +1,6 @@
 """ekf_node / ukf_node in-process: robot_localization's parameters in, odometry/filtered out,
-equal to the core's loop on the same messages; bad input dropped, never a NaN published."""
+equal to the core's loop on the same messages; pose inputs placed in the world frame; bad
+input dropped, never a NaN published."""
 
 from __future__ import annotations
 
@@ -7,13 +8,18 @@ import math
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 import rclpy.node
 from rclpy.qos import QoSProfile, qos_profile_sensor_data
 
+from estimation_nodes.core.fusion.state import quaternion_from_rpy
+from estimation_nodes.core.transforms.rigid import Transform
 from estimation_nodes.nodes.fusion_node import FusionNode
 from estimation_nodes.nodes.parameters import ConfigurationError
+from estimation_nodes.nodes.tf import StaticTransformBroadcaster, to_message
 from tests.conftest import spin_until
 
 TWIST_CONFIG = [False] * 6 + [True, True, True, False, False, True] + [False] * 3
@@ -79,7 +85,7 @@ def test_a_nan_reading_is_dropped_and_counted(fusion_node, context, executor):
     node = fusion_node()
     bad = odom(1_000_000_000, float("nan"), 0.0)
     node._sensor_subscriptions[0].callback(bad)
-    assert node.dropped_non_finite == 1
+    assert node._inputs.dropped == {"odom0: a non-finite value": 1}
     assert node._fusion.queued == 0
 
 
@@ -108,3 +114,113 @@ def test_a_clock_that_jumps_back_resets_the_filter(fusion_node, make_node, execu
     assert spin_until(executor, lambda: at(101) and node._fusion.initialized, 10.0)
     assert spin_until(executor, lambda: at(5) and node.resets == 1, 10.0)
     assert not node._fusion.initialized
+
+
+def pose_stamped(t_ns: int, frame: str, position, yaw: float) -> PoseWithCovarianceStamped:
+    msg = PoseWithCovarianceStamped()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t_ns, 1_000_000_000)
+    msg.header.frame_id = frame
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    p.x, p.y, p.z = position
+    q.x, q.y, q.z, q.w = quaternion_from_rpy(0.0, 0.0, yaw)
+    msg.pose.covariance = list(np.diag([1e-2, 1e-2, 1e-2, 1e-3, 1e-3, 1e-3]).ravel())
+    return msg
+
+
+#: A pose input's frame in odom: 10 m east, 2 m south, turned 90 degrees.
+GPS_ORIGIN = Transform((10.0, -2.0, 0.0), quaternion_from_rpy(0.0, 0.0, math.pi / 2))
+
+
+@pytest.mark.parametrize("placed_by", ["sensor_mounts", "tf_static"])
+def test_a_pose_input_is_placed_in_the_world_frame(fusion_node, collector_factory, make_node,
+                                                   context, executor, placed_by):
+    values = {"pose0": "gps/pose", "pose0_config": [True, True, False, False, False, True] +
+              [False] * 9}
+    if placed_by == "sensor_mounts":
+        values["sensor_mounts"] = [f"gps_origin=10,-2,0,0,0,{math.pi / 2!r}"]
+    else:
+        StaticTransformBroadcaster(make_node("gps_mount")).send(
+            [to_message("odom", "gps_origin", 0, GPS_ORIGIN)])
+    node = fusion_node(**values)
+    if placed_by == "tf_static":
+        assert spin_until(executor, lambda: node.tf_buffer.can_transform("odom", "gps_origin"),
+                          10.0)
+    collector = collector_factory({"odometry/filtered": (Odometry, QoSProfile(depth=100))})
+    publisher = make_node("gps").create_publisher(PoseWithCovarianceStamped, "gps/pose",
+                                                  qos_profile_sensor_data)
+    assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10.0)
+    t0 = node.get_clock().now().nanoseconds
+
+    def published() -> bool:
+        publisher.publish(pose_stamped(t0, "gps_origin", (3.0, 1.0, 0.0), 0.2))
+        return bool(collector.messages["odometry/filtered"])
+
+    assert spin_until(executor, published, 10.0)
+    last = collector.messages["odometry/filtered"][-1].pose.pose
+    # (3, 1) turned 90 degrees is (-1, 3); plus the origin (10, -2).
+    assert (last.position.x, last.position.y) == pytest.approx((9.0, 1.0), abs=1e-9)
+    q = last.orientation
+    assert 2.0 * math.atan2(q.z, q.w) == pytest.approx(math.pi / 2 + 0.2, abs=1e-9)
+    assert node._inputs.dropped == {}
+
+
+def test_a_pose_in_a_frame_with_no_place_in_the_world_is_dropped_and_counted(fusion_node):
+    node = fusion_node(odom0_config=[True] * 6 + TWIST_CONFIG[6:])
+    msg = odom(1_000_000_000, 1.0, 0.0)
+    msg.header.frame_id = "elsewhere"
+    node._sensor_subscriptions[0].callback(msg)
+    assert node._inputs.dropped == {"odom0_pose: no transform from 'elsewhere' to 'odom'": 1}
+    # The twist part does not depend on it: it was queued.
+    assert node._fusion.queued == 1
+
+
+def test_a_pose_on_set_pose_moves_the_estimate_there(fusion_node, collector_factory,
+                                                    make_node, executor):
+    node = fusion_node()
+    collector = collector_factory({"odometry/filtered": (Odometry, QoSProfile(depth=100))})
+    publisher = make_node("operator").create_publisher(PoseWithCovarianceStamped,
+                                                       "set_pose", 1)
+    assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10.0)
+    t0 = node.get_clock().now().nanoseconds
+    node._sensor_subscriptions[0].callback(odom(t0, 0.0, 0.0))
+    # As in the peer, set_pose moves an estimate: the filter has one once initialized.
+    assert spin_until(executor, lambda: node._fusion.initialized, 10.0)
+    publisher.publish(pose_stamped(t0 + 1, "odom", (4.0, -3.0, 0.0), 1.0))
+
+    def at_the_set_pose() -> bool:
+        poses = collector.messages["odometry/filtered"]
+        return bool(poses) and poses[-1].pose.pose.position.x == pytest.approx(4.0)
+
+    assert spin_until(executor, at_the_set_pose, 10.0)
+    last = collector.messages["odometry/filtered"][-1]
+    assert last.pose.pose.position.y == pytest.approx(-3.0)
+    q = last.pose.pose.orientation
+    assert 2.0 * math.atan2(q.z, q.w) == pytest.approx(1.0)
+    assert node._fusion.counts.applied["set_pose"] == 1
+
+
+def test_diagnostics_count_each_inputs_measurements_applied_rejected_and_dropped(
+        fusion_node, collector_factory, executor):
+    node = fusion_node(print_diagnostics=True, odom0_twist_rejection_threshold=2.0)
+    collector = collector_factory({"/diagnostics": (DiagnosticArray, 10)})
+    t0 = node.get_clock().now().nanoseconds - 1_000_000_000
+    on_odom = node._sensor_subscriptions[0].callback
+    on_odom(odom(t0, 1.0, 0.0))
+    on_odom(odom(t0 + 20_000_000, 50.0, 0.0))         # 49 m/s off: beyond 2 sigma
+    on_odom(odom(t0 + 10_000_000, 1.0, 0.0))          # older than the last one
+    on_odom(odom(t0 + 30_000_000, math.nan, 0.0))
+
+    def reported() -> dict[str, str]:
+        statuses = [status for msg in collector.messages["/diagnostics"]
+                    for status in msg.status]
+        return {v.key: v.value for v in statuses[-1].values} if statuses else {}
+
+    assert spin_until(executor, lambda: reported().get("odom0_twist rejected") == "1", 10.0)
+    values = reported()
+    assert {key: values[key] for key in values if key.startswith("odom0")} == {
+        "odom0_twist applied": "1", "odom0_twist rejected": "1",
+        "odom0_twist dropped: older than the last one": "1",
+        "odom0 dropped: a non-finite value": "1"}
+    status = collector.messages["/diagnostics"][-1].status[0]
+    assert status.level == DiagnosticStatus.WARN
+    assert "odom0_twist rejected: 1 since the last report" in status.message

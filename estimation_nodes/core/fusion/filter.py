@@ -1,12 +1,14 @@
 """The fusion filter as robot_localization's node runs it, with no ROS in it.
 
 - The first measurement initializes: the entries it measures take its values and
-  covariance, the others keep the initial state and ``initial_estimate_covariance``.
+  covariance (variances floored as a correction floors them), the others keep the
+  initial state and ``initial_estimate_covariance``.
 - Later ones predict from the last measurement's time to theirs (none when they are
   not later), then correct; the last measurement time only moves forward.
 - ``update(now)`` is the node's periodic step: it takes the queued measurements whose
   time has come, in time order (equal times in the order they arrived); when none was
   queued for ``sensor_timeout`` it predicts to ``now`` so the estimate keeps moving.
+- ``set_pose(measurement, now)`` puts the estimate where the measurement says.
 - ``differentiate(now)`` is the angular acceleration the IMU's lever arm needs, the
   change of the rates between two periodic steps, as the peer computes it.
 """
@@ -23,6 +25,10 @@ from estimation_nodes.core.fusion import steps
 from estimation_nodes.core.fusion.state import STATE_SIZE, TWIST, VROLL
 from estimation_nodes.core.fusion.steps import Measurement, Rejected, UnscentedWeights
 from estimation_nodes.core.validation import FloatArray
+
+
+#: The variance ``set_pose`` gives the entries its pose does not set (the peer's).
+SET_POSE_VARIANCE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -100,10 +106,24 @@ class FusionFilter:
 
     def _initialize(self, measurement: Measurement) -> None:
         idx = list(measurement.indices)
-        self.x[idx] = measurement.z[idx]
-        self.p[np.ix_(idx, idx)] = measurement.covariance[np.ix_(idx, idx)]
+        # R with its variances floored, as a correction would take it: the peer copies the
+        # message's, so a negative variance there would make P indefinite.
+        self.x[idx], self.p[np.ix_(idx, idx)] = steps.subset(measurement)
         self.initialized = True
         self.last_time_ns = measurement.stamp_ns
+        self.counts.add(self.counts.applied, measurement.source)
+
+    def set_pose(self, measurement: Measurement, now_ns: int) -> None:
+        """The peer's ``set_pose``: the state is the measurement's values (0 where it has
+        none), the covariance its covariance there (variances floored) and 1e-6 elsewhere;
+        what was queued is dropped; the last measurement time is ``now_ns``. Whether the
+        filter was initialized stays as it was, as in the peer."""
+        self.x = np.zeros(STATE_SIZE)
+        self.p = np.eye(STATE_SIZE) * SET_POSE_VARIANCE
+        idx = list(measurement.indices)
+        self.x[idx], self.p[np.ix_(idx, idx)] = steps.subset(measurement)
+        self._queue.clear()
+        self.last_time_ns = now_ns
         self.counts.add(self.counts.applied, measurement.source)
 
     def _process_noise(self) -> FloatArray:

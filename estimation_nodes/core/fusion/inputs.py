@@ -5,37 +5,48 @@ and origin of the sensor frame in the robot's frame, ``Mount``), and the update 
 the ``*_config`` parameter, and returns a ``Measurement`` (or None when nothing is left
 to measure). The mask goes through the same rotation as the data: a measured axis
 that the mount turns into another one measures that one.
+- ``pose``: a pose given in some frame, placed in the world frame by that frame's
+  ``Mount`` in the world (the peer's tf lookup from the message's frame to world_frame).
+- ``pose_change``: two consecutive poses as the velocity that moves one to the other
+  (``_differential``), with the peer's covariance (R_previous + R_current) dt.
 - ``twist``: linear and angular velocity; v_base = R v + o x omega_state.
-- ``imu_orientation``: an IMU reports its attitude in the world frame, so only the
-  mount's angles are taken off (roll, pitch and yaw minus the mount's, the roll/pitch
-  pair turned by the mount's yaw), not a frame change.
+- ``imu_attitude``, ``imu_orientation``: an IMU reports its attitude in the world frame,
+  so only the mount's angles are taken off (roll, pitch and yaw minus the mount's, the
+  roll/pitch pair turned by the mount's yaw), not a frame change.
 - ``acceleration``: gravity (0, 0, g) seen in the sensor's frame (through the sensor's
   world attitude) taken off when asked, then a_base = R a + o x alpha - (o x omega) x
   omega. (The peer's ROS 2 branch takes gravity off after the rotation into the
   robot's frame, with the sensor's attitude: for a sensor mounted turned, as the Husky's,
   that mixes frames; its bag tests' expected poses agree with the order here.)
+- ``force_two_d``: ``two_d_mode``'s constraint added to any of them.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from estimation_nodes.core.fusion.state import (
-    ACCELERATION, AX, POSE, ROLL, STATE_SIZE, TWIST, VROLL, VX, rotation_from_quaternion,
-    rotation_from_rpy, rpy_from_rotation, wrap)
+    ACCELERATION, AX, AZ, ORIENTATION, PITCH, POSE, ROLL, STATE_SIZE, TWIST, VPITCH, VROLL,
+    VX, VZ, X, Z, rotation_from_quaternion, rotation_from_rpy, rpy_from_rotation, wrap)
 from estimation_nodes.core.fusion.steps import Measurement
 from estimation_nodes.core.validation import FloatArray
 
 #: Standard gravity (m/s^2), robot_localization's default ``gravitational_acceleration``.
 GRAVITY = 9.80665
+#: What ``two_d_mode`` holds at zero: z, roll, pitch, their rates and the vertical acceleration.
+PLANAR_ZEROS = (Z, ROLL, PITCH, VZ, VROLL, VPITCH, AZ)
+#: The variance the peer gives those zeros.
+PLANAR_VARIANCE = 1e-6
 
 
 @dataclass(frozen=True)
 class Mount:
-    """Where a sensor sits on the robot: its frame's rotation and origin in the robot's."""
+    """Where a frame sits in another: its rotation and origin there. A sensor's frame on the
+    robot, a pose input's frame in the world, or a pose itself (the body's frame)."""
 
     rotation: FloatArray = field(default_factory=lambda: np.eye(3))
     origin: FloatArray = field(default_factory=lambda: np.zeros(3))
@@ -44,6 +55,13 @@ class Mount:
     def from_rpy(cls, xyz: tuple[float, float, float], rpy: tuple[float, float, float]
                  ) -> "Mount":
         return cls(rotation_from_rpy(*rpy), np.asarray(xyz, dtype=float))
+
+    def __mul__(self, other: "Mount") -> "Mount":
+        """``other``, given in this frame, in this frame's parent (tf2's composition)."""
+        return Mount(self.rotation @ other.rotation, self.rotation @ other.origin + self.origin)
+
+    def inverse(self) -> "Mount":
+        return Mount(self.rotation.T, -self.rotation.T @ self.origin)
 
 
 IDENTITY = Mount()
@@ -93,17 +111,73 @@ def twist(stamp_ns: int, linear: FloatArray, angular: FloatArray, covariance6: F
     return _measurement(stamp_ns, z, covariance, _only(mask, TWIST), threshold, source)
 
 
-def imu_orientation(stamp_ns: int, quaternion: tuple[float, float, float, float],
-                    covariance3: FloatArray, update: tuple[bool, ...], mount: Mount = IDENTITY,
-                    threshold: float = math.inf, source: str = "") -> Measurement | None:
-    """An IMU's attitude (x, y, z, w, in the world frame) as a roll/pitch/yaw measurement."""
+def pose(stamp_ns: int, body: Mount, covariance6: FloatArray, update: tuple[bool, ...],
+         frame: Mount = IDENTITY, threshold: float = math.inf, source: str = ""
+         ) -> Measurement | None:
+    """A pose (``body``: the robot's frame in the message's frame) as a measurement of x, y,
+    z, roll, pitch and yaw in the world: ``frame * body``, ``frame`` being the message's
+    frame in the world. Its covariance and mask turn with the frame's rotation."""
+    placed = frame * body
+    z = np.zeros(STATE_SIZE)
+    z[X:X + 3] = placed.origin
+    z[ROLL:ROLL + 3] = rpy_from_rotation(placed.rotation)
+    rot6 = _block_rotation(frame.rotation)
+    covariance = np.zeros((STATE_SIZE, STATE_SIZE))
+    covariance[POSE, POSE] = rot6 @ covariance6 @ rot6.T
+    mask = list(update)
+    mask[X:X + 3] = _masked(frame.rotation, tuple(update[X:X + 3]))
+    mask[ROLL:ROLL + 3] = _masked(frame.rotation, tuple(update[ROLL:ROLL + 3]))
+    return _measurement(stamp_ns, z, covariance, _only(mask, POSE), threshold, source)
+
+
+def pose_change(stamp_ns: int, previous: Mount, current: Mount, dt: float,
+                covariance6: FloatArray, update: tuple[bool, ...], threshold: float = math.inf,
+                source: str = "", turn: FloatArray | None = None) -> Measurement | None:
+    """Two consecutive poses ``dt`` apart as the twist that moves ``previous`` to ``current``
+    (the peer's ``_differential``): the change previous^-1 current, in the previous pose's
+    frame, over dt: its translation / dt and its roll, pitch, yaw / dt.
+
+    ``covariance6`` is the sum of the two poses' covariances; the twist's is that times dt,
+    as the peer has it. The pose entries of ``update`` say which rates are measured. An
+    IMU's ``turn`` (``imu_turn``) turns the mask and the covariance, as for its attitude.
+    """
+    change = previous.inverse() * current
+    if turn is not None:
+        rot6 = _block_rotation(turn)
+        covariance6 = rot6 @ covariance6 @ rot6.T
+        update = (*_masked(turn, tuple(update[X:X + 3])),
+                  *_masked(turn, tuple(update[ROLL:ROLL + 3])))
+    twist_update = [False] * STATE_SIZE
+    twist_update[TWIST] = update[POSE]
+    return twist(stamp_ns, change.origin / dt,
+                 np.asarray(rpy_from_rotation(change.rotation)) / dt, covariance6 * dt,
+                 tuple(twist_update), np.zeros(3), IDENTITY, threshold, source)
+
+
+def imu_turn(mount: Mount) -> FloatArray:
+    """The mount's yaw alone: what turns an IMU's roll and pitch, their mask and their
+    covariance into the robot's (a sideways IMU's pitch is the robot's roll)."""
+    return rotation_from_rpy(0.0, 0.0, rpy_from_rotation(mount.rotation)[2])
+
+
+def imu_attitude(quaternion: tuple[float, float, float, float], mount: Mount) -> FloatArray:
+    """An IMU's attitude (x, y, z, w, in the world frame) as the robot's, a rotation: the
+    mount's angles taken off (roll, pitch and yaw minus the mount's), the roll/pitch pair
+    turned by the mount's yaw, as the peer does (not a frame change)."""
     roll0, pitch0, yaw0 = rpy_from_rotation(mount.rotation)
-    turn = rotation_from_rpy(0.0, 0.0, yaw0)
     roll, pitch, yaw = rpy_from_rotation(rotation_from_quaternion(*quaternion))
     offsets = np.array([wrap(roll - roll0), wrap(pitch - pitch0), wrap(yaw - yaw0)])
-    angles = rpy_from_rotation(rotation_from_rpy(*(turn @ offsets)))
+    return rotation_from_rpy(*(imu_turn(mount) @ offsets))
+
+
+def imu_orientation(stamp_ns: int, attitude: FloatArray, covariance3: FloatArray,
+                    update: tuple[bool, ...], mount: Mount = IDENTITY,
+                    threshold: float = math.inf, source: str = "") -> Measurement | None:
+    """An IMU's attitude (``imu_attitude``, maybe relative to its first) as a roll, pitch,
+    yaw measurement; its covariance and mask turned by the mount's yaw."""
+    turn = imu_turn(mount)
     z = np.zeros(STATE_SIZE)
-    z[ROLL:ROLL + 3] = angles
+    z[ROLL:ROLL + 3] = rpy_from_rotation(attitude)
     covariance6 = np.zeros((6, 6))
     covariance6[3:, 3:] = covariance3
     rot6 = _block_rotation(turn)
@@ -111,8 +185,7 @@ def imu_orientation(stamp_ns: int, quaternion: tuple[float, float, float, float]
     covariance[POSE, POSE] = rot6 @ covariance6 @ rot6.T
     mask = list(update)
     mask[ROLL:ROLL + 3] = _masked(turn, tuple(update[ROLL:ROLL + 3]))
-    return _measurement(stamp_ns, z, covariance, _only(mask, slice(ROLL, ROLL + 3)),
-                        threshold, source)
+    return _measurement(stamp_ns, z, covariance, _only(mask, ORIENTATION), threshold, source)
 
 
 def acceleration(stamp_ns: int, linear: FloatArray, covariance3: FloatArray,
@@ -138,6 +211,25 @@ def acceleration(stamp_ns: int, linear: FloatArray, covariance3: FloatArray,
     mask = list(update)
     mask[AX:AX + 3] = _masked(r, tuple(update[AX:AX + 3]))
     return _measurement(stamp_ns, z, covariance, _only(mask, ACCELERATION), threshold, source)
+
+
+def force_two_d(measurement: Measurement) -> Measurement:
+    """The measurement saying also that z, roll, pitch, vz, vroll, vpitch and az are 0, with
+    variance 1e-6, whatever the sensor said of them (the peer's ``forceTwoD``, which
+    ``two_d_mode`` applies to every measurement, so the state stays in the plane).
+
+    Their cross terms with the other entries are zeroed. The peer keeps the message's,
+    which belong to the values replaced and can leave R indefinite.
+    """
+    zeros = list(PLANAR_ZEROS)
+    z = measurement.z.copy()
+    z[zeros] = 0.0
+    covariance = measurement.covariance.copy()
+    covariance[zeros, :] = 0.0
+    covariance[:, zeros] = 0.0
+    covariance[zeros, zeros] = PLANAR_VARIANCE
+    indices = tuple(sorted(set(measurement.indices) | set(PLANAR_ZEROS)))
+    return dataclasses.replace(measurement, z=z, covariance=covariance, indices=indices)
 
 
 def _only(mask: list[bool], part: slice) -> list[bool]:

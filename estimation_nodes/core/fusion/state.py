@@ -22,6 +22,7 @@ NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz",
          "vroll", "vpitch", "vyaw", "ax", "ay", "az")
 ANGLES = (ROLL, PITCH, YAW)
 POSE = slice(X, YAW + 1)
+ORIENTATION = slice(ROLL, YAW + 1)
 TWIST = slice(VX, VYAW + 1)
 ACCELERATION = slice(AX, AZ + 1)
 

@@ -5,7 +5,9 @@ H is a selection of rows of the identity. Both filters:
 - predict with the motion model and P' = ... + dt Q (the process noise is a rate);
 - correct with the innovation's angles wrapped, and skip a measurement whose squared
   Mahalanobis distance reaches its threshold squared (``Rejected``);
-- raise variances below 1e-9 to 1e-9 and take negative ones as positive, as the peer.
+- raise variances below 1e-9 to 1e-9 and take negative ones as positive, as the peer;
+  ``covariance_problem`` says when what is left still cannot be a covariance (not
+  finite, not symmetric positive semi-definite), for the caller to drop it.
 The EKF's covariance update is the Joseph form. The UKF is the scaled unscented
 transform with the peer's weights (lambda = alpha^2 (n + kappa) - n); its first
 correction after a prediction uses the propagated sigma points, later ones draw new
@@ -22,7 +24,8 @@ import numpy as np
 from estimation_nodes.core.fusion import motion
 from estimation_nodes.core.fusion.state import ANGLES, PITCH, ROLL, STATE_SIZE, YAW, \
     wrap_state_angles
-from estimation_nodes.core.validation import FloatArray
+from estimation_nodes.core.errors import InvalidInputError
+from estimation_nodes.core.validation import FloatArray, check_covariance
 
 #: The smallest variance a measurement may claim (the peer's floor).
 MIN_VARIANCE = 1e-9
@@ -63,6 +66,21 @@ def subset(measurement: Measurement) -> tuple[FloatArray, FloatArray]:
     diagonal = np.abs(np.diag(r))
     np.fill_diagonal(r, np.maximum(diagonal, MIN_VARIANCE))
     return z, r
+
+
+def covariance_problem(measurement: Measurement) -> str | None:
+    """Why the measurement's R (on its entries, its variances as ``subset`` floors them)
+    cannot be used, None when it can: a non-finite entry, or a matrix that is not symmetric
+    positive semi-definite (the peer takes it as it is: an indefinite R can turn the
+    innovation's covariance indefinite and the state's with it)."""
+    _, r = subset(measurement)
+    if not np.all(np.isfinite(r)):
+        return "a non-finite covariance"
+    try:
+        check_covariance("R", r, len(measurement.indices))
+    except InvalidInputError:
+        return "a covariance that is not symmetric positive semi-definite"
+    return None
 
 
 def _wrap_angle_entries(vector: FloatArray, indices: tuple[int, ...]) -> FloatArray:

@@ -45,8 +45,7 @@ def bag_messages(path: Path, topics: set[str]):
 def run(config: FusionConfig, messages, mounts: dict[str, Mount] | None = None) -> FusionRun:
     """The node's loop over recorded messages: callbacks between periodic updates."""
     fusion = FusionFilter(config.settings)
-    sensor_inputs = SensorInputs(dict(config.sensors), dict(mounts or {}),
-                                 config.base_link_frame, config.gravity)
+    sensor_inputs = config.sensor_inputs(mounts)
     by_topic = {}
     for sensor in config.sensors.values():
         by_topic.setdefault(sensor.topic.lstrip("/"), []).append(sensor)
