@@ -29,7 +29,8 @@ SUPPORTED = {
     "print_diagnostics", "use_sim_time",
 }
 #: Parameters that change nothing a run computes (logging, the peer's launch helpers).
-HARMLESS = {"clear_params", "debug", "debug_out_file"}
+#: And every rclpy node's own (rclpy declares it; the node reads it from the overrides).
+HARMLESS = {"clear_params", "debug", "debug_out_file", "start_type_description_service"}
 SENSOR_KINDS = ("odom", "pose", "twist", "imu")
 _TOPIC = {"", "_config", "_queue_size"}
 #: Per-input suffixes read and acted on, by kind: the peer's names (a pose or twist

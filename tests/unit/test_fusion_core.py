@@ -644,3 +644,11 @@ def test_a_differential_imu_measures_the_rates_between_two_attitudes():
     np.testing.assert_allclose(measured.z[9:12], np.array(rpy_of(change)) / 0.1, atol=1e-9)
     np.testing.assert_allclose(measured.covariance[9:12, 9:12],
                                IMU_TURN @ (c1 + c2) @ IMU_TURN.T * 0.1, atol=1e-12)
+
+
+def test_rclpys_own_parameters_are_no_unsupported_ones():
+    """Every rclpy node declares use_sim_time and start_type_description_service: neither
+    is a robot_localization parameter we do not support."""
+    config = fusion_config({"odom0": "odom", "use_sim_time": True,
+                            "start_type_description_service": True, "frequencyy": 3.0})
+    assert config.unsupported == ("frequencyy",)
