@@ -151,9 +151,12 @@ class GridLocalizer(LifecycleNode):
         self._diagnostics_pub = self.create_lifecycle_publisher(DiagnosticArray, "/diagnostics",
                                                                 10)
         self._pose_msg = PoseWithCovarianceStamped()
-        self._tf_listener = TransformListener(self, self.tf_buffer,
-                                              on_jump_back=self._on_time_jump_back,
-                                              on_transforms=self._on_transforms) \
+        # A transform stamped further ahead of the node's clock than the tolerance (0.5 s at
+        # least: clocks of two processes differ) is a clock or a driver gone wrong:
+        # dropped and counted (tf_dropped.future).
+        self._tf_listener = TransformListener(
+            self, self.tf_buffer, round(max(self._frames.transform_tolerance, 0.5) * 1e9),
+            on_jump_back=self._on_time_jump_back, on_transforms=self._on_transforms) \
             if self._frames.odometry_from_tf else None
         self._tf_broadcaster = TransformBroadcaster(self) if self._frames.tf_broadcast else None
         subscribe, made = self.create_subscription, self._made

@@ -94,3 +94,22 @@ def test_a_clock_that_jumps_back_clears_the_dynamic_transforms(make_node, execut
     assert spin_until(executor, lambda: (tick(10), bool(jumps))[1], 10.0)
     assert not buffer.can_transform("odom", "base_link")
     assert buffer.can_transform("base_link", "laser")
+
+
+def test_a_transform_from_the_future_and_a_changed_static_one_are_dropped_and_counted(
+        make_node, executor):
+    sender = make_node("sender")
+    dynamic, static = TransformBroadcaster(sender), StaticTransformBroadcaster(sender)
+    listener_node = make_node("listener")
+    buffer = TransformBuffer()
+    listener = TransformListener(listener_node, buffer, future_tolerance_ns=S)
+    assert spin_until(executor, lambda: dynamic._publisher.get_subscription_count() > 0, 10.0)
+    now = listener_node.get_clock().now().nanoseconds
+    dynamic.send([to_message("odom", "base_link", now + 60 * S, Transform())])
+    static.send([to_message("base_link", "laser", 0, Transform((0.25, 0.0, 0.0)))])
+    assert spin_until(executor, lambda: buffer.can_transform("base_link", "laser"), 10.0)
+    static.send([to_message("base_link", "laser", 0, Transform((0.5, 0.0, 0.0)))])
+    assert spin_until(executor, lambda: listener.dropped == {"future": 1, "static_changed": 1},
+                      10.0), listener.dropped
+    assert buffer.lookup("base_link", "laser").translation == (0.25, 0.0, 0.0)
+    assert not buffer.can_transform("odom", "base_link")

@@ -1,12 +1,14 @@
 """estimation_play: a recording's messages published again, with their recorded timing.
 
-    estimation_play RECORDING [--rate R] [--topics /scan /odom ...] [--clock]
+    estimation_play RECORDING [--rate R] [--topics /scan /odom ...] [--clock] [--loop]
                     [--wait-for-subscribers SECONDS] [--delay SECONDS]
 
 RECORDING is one of the package's MCAP recordings, a robot's ROS 1 bag (``.bag``) or a
 rosbag2 folder (MCAP or sqlite3): bags are read with the ``rosbags`` library and their
 messages published as this ROS 2's types (tools/recording/bags.py), ``/tf`` and
-``/tf_static`` included (``/tf_static`` latched, as its publishers do).
+``/tf_static`` included (``/tf_static`` latched, as its publishers do). ``--loop`` plays
+it again and again until Ctrl-C, as ``ros2 bag play --loop``: with ``--clock`` the time
+then jumps back at each pass, which a node under ``use_sim_time`` must take as a restart.
 
 Each message goes out at its recorded time (the log time, scaled by 1/R), as its
 recorded CDR bytes, with the QoS its driver would use: a laser scan best effort
@@ -190,6 +192,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                         help="play only these topics (default: all)")
     parser.add_argument("--clock", action="store_true",
                         help="publish /clock with the recorded time (for use_sim_time)")
+    parser.add_argument("--loop", action="store_true",
+                        help="play the recording again and again until Ctrl-C")
     parser.add_argument("--wait-for-subscribers", type=float, default=0.0, metavar="SECONDS",
                         help="before the first message, wait up to SECONDS for every "
                              "played topic to have a subscriber (default: start at once)")
@@ -249,7 +253,15 @@ def _run(args: argparse.Namespace, messages: list[Recorded]) -> int:
         print(f"estimation_play: {len(messages)} messages on "
               f"{len({m.topic for m in messages})} topics, {span:.1f} s of recording at "
               f"rate {args.rate:g}", flush=True)
-        print(f"estimation_play: {player.play(args.rate)} messages published", flush=True)
+        passes = 0
+        while True:
+            published = player.play(args.rate)
+            passes += 1
+            if not args.loop:
+                break
+            print(f"estimation_play: pass {passes}: {published} messages published; again",
+                  flush=True)
+        print(f"estimation_play: {published} messages published", flush=True)
         unacknowledged = player.wait_for_acknowledgements(ACK_TIMEOUT_S)
         if unacknowledged:
             print(f"estimation_play: not every message was acknowledged on "
