@@ -101,6 +101,10 @@ UPDATE_TIMES_KEPT = 1000
 #: during an update waits, and one after it replaces it (WARN in /diagnostics). Counted
 #: directly where the scans carry their period (scan_time): scans_missed.
 BUSY_WARNING = 0.9
+#: /tf messages queued while an update runs: every odom -> base_link sample is followed
+#: (a lost one would move the next update's prediction and no replay could make it
+#: again), as ODOM_DEPTH for the odom topic; a robot's /tf also carries its other frames.
+TF_DEPTH = 5000
 #: States shown in particle_cloud (RViz's PoseArray): the most probable ones.
 PARTICLE_CLOUD_STATES = 500
 
@@ -156,7 +160,8 @@ class GridLocalizer(LifecycleNode):
         # dropped and counted (tf_dropped.future).
         self._tf_listener = TransformListener(
             self, self.tf_buffer, round(max(self._frames.transform_tolerance, 0.5) * 1e9),
-            on_jump_back=self._on_time_jump_back, on_transforms=self._on_transforms) \
+            on_jump_back=self._on_time_jump_back, on_transforms=self._on_transforms,
+            depth=TF_DEPTH) \
             if self._frames.odometry_from_tf else None
         self._tf_broadcaster = TransformBroadcaster(self) if self._frames.tf_broadcast else None
         subscribe, made = self.create_subscription, self._made

@@ -61,7 +61,9 @@ class TransformListener:
 
     ``future_tolerance_ns``: a dynamic transform stamped further than this ahead of the
     node's clock is refused (None: no such check). ``on_jump_back`` is called after the
-    buffer was cleared for a clock that went back; ``on_transforms`` after each message,
+    buffer was cleared for a clock that went back; ``depth``: /tf messages queued while the
+    node is busy (tf2_ros's 100; more for a node that must see every sample);
+    ``on_transforms`` after each message,
     with the (parent, child, stamp, transform) of each transform the buffer took (a node
     waiting for a transform looks again; one that follows an edge sees each sample).
     """
@@ -71,7 +73,8 @@ class TransformListener:
                  on_jump_back: Callable[[], None] | None = None,
                  on_transforms: Callable[[list[tuple[str, str, int, Transform]]], None]
                  | None = None,
-                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static") -> None:
+                 tf_topic: str = "/tf", tf_static_topic: str = "/tf_static",
+                 depth: int = TF_QOS.depth) -> None:
         self._node = node
         self.buffer = buffer
         self._future_ns = future_tolerance_ns
@@ -80,8 +83,10 @@ class TransformListener:
         self.dropped: Counter[str] = Counter()
         self._warnings = ThrottledWarnings(node.get_logger())
         self._subscriptions = [
-            node.create_subscription(TFMessage, tf_topic,
-                                     lambda msg: self._take(msg, False), TF_QOS),
+            node.create_subscription(TFMessage, tf_topic, lambda msg: self._take(msg, False),
+                                     QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                                                reliability=ReliabilityPolicy.RELIABLE,
+                                                durability=DurabilityPolicy.VOLATILE)),
             node.create_subscription(TFMessage, tf_static_topic,
                                      lambda msg: self._take(msg, True), TF_STATIC_QOS),
         ]

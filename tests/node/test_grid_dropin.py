@@ -232,14 +232,15 @@ def test_a_bag_played_again_resets_and_the_second_pass_localizes_as_the_first(
         heard = len(robot.poses)
         drive(robot, node, range(0, 24, 2))
         last = divmod(stamp(22), SECOND)      # the last scan's update
-        assert spin_until(executor, lambda h=heard: any(
+        assert spin_until(executor, lambda h=heard, last=last: any(
             (p.header.stamp.sec, p.header.stamp.nanosec) == last for p in robot.poses[h:]),
             10.0)
         passes.append({(p.header.stamp.sec, p.header.stamp.nanosec): planar_pose(p.pose.pose)
                        for p in robot.poses[heard:]})
         robot.tick(stamp(0) - 5 * SECOND)      # the bag starts again
-        assert spin_until(executor, lambda n=len(passes): node.handled["time_jumped_back"]
-                          == n, 10.0)
+        jumps = len(passes)
+        assert spin_until(executor, lambda n=jumps: node.handled["time_jumped_back"] == n,
+                          10.0)
     first, second = passes
     updates = sorted(stamp_ for stamp_ in first if stamp_[0] >= T0 // SECOND)
     assert len(updates) >= 6 and updates == sorted(s for s in second if s[0] >= T0 // SECOND)
