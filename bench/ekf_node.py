@@ -110,6 +110,7 @@ def start_localizer(work: Path, kind: str, initial: np.ndarray, landmarks_file: 
     localizer = subprocess.Popen(
         [executable("ekf_localizer"), "--ros-args", *from_file,
          "-p", f"landmarks_file:={landmarks_file}", "-p", f"filter:={kind}",
+         "-p", "autostart:=true",
          "-p", "initial_pose:=[" + ", ".join(repr(float(v)) for v in initial) + "]"],
         env=env, stdout=(work / "localizer.log").open("w"), stderr=subprocess.STDOUT)
     if not wait_for_line(localizer, work / "localizer.log", "ready:", 120):

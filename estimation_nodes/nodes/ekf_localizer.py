@@ -8,6 +8,12 @@ bearing. Events are applied in the order of their stamps, whatever order they
 arrive in (core/causal_order.py). After every event that changes the estimate,
 ``pose`` (PoseWithCovarianceStamped in ``frame_id``, stamped with the event's
 time). The filter, its gate and its recovery are core/kalman/landmarks.py.
+
+As grid_localizer, a lifecycle node (``autostart`` to run alone: nothing is taken or
+published unless it is active), and after each odometry message that is the newest
+event, ``frame_id -> odom_frame_id`` on /tf: the estimate composed with the inverse of
+that message's own pose, stamped with its time plus ``transform_tolerance``, so that the
+tree's map -> base_link is the estimate.
 """
 
 from __future__ import annotations
@@ -21,7 +27,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseWithCovarianceStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import PointCloud2
 from std_srvs.srv import Trigger
@@ -29,8 +35,10 @@ from std_srvs.srv import Trigger
 from estimation_nodes.core.causal_order import CausalOrder
 from estimation_nodes.core.kalman import ukf
 from estimation_nodes.core.kalman.landmarks import LandmarkLocalization
+from estimation_nodes.core.transforms.rigid import Transform
 from estimation_nodes.nodes.diagnostics import status_array
-from estimation_nodes.nodes.grid_messages import pose_with_covariance
+from estimation_nodes.nodes.grid_messages import planar_pose, pose_with_covariance
+from estimation_nodes.nodes.lifecycle import ManagedNode
 from estimation_nodes.nodes.landmark_messages import (
     MalformedCloudError,
     initial_pose_of,
@@ -40,6 +48,7 @@ from estimation_nodes.nodes.parameters import declare_and_build, overlay, reject
 from estimation_nodes.nodes.process import main_for
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.nodes.stamps import stamp_or_none
+from estimation_nodes.nodes.tf import TransformBroadcaster, to_message
 from estimation_nodes.nodes.throttled import ThrottledWarnings
 from estimation_nodes.params import topics
 from estimation_nodes.params.landmarks import build_ekf_localizer_settings
@@ -75,7 +84,7 @@ class _Events:
         return True
 
 
-class EkfLocalizer(Node):
+class EkfLocalizer(ManagedNode):
     """The robot's pose among landmarks, as an EKF or a UKF estimate."""
 
     node_name = "ekf_localizer"
@@ -95,23 +104,40 @@ class EkfLocalizer(Node):
         self._nis: list[float] = []
         #: The stamp of the newest event applied: what the estimate is as of.
         self._newest_ns = 0
-        self._pose_pub = self.create_publisher(PoseWithCovarianceStamped, topics.POSE,
-                                               latched_qos(1))
-        self._diagnostics_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         self._pose_msg = PoseWithCovarianceStamped()
-        self.create_subscription(Odometry, topics.ODOM, self._on_odom, INPUT_QOS)
-        self.create_subscription(PointCloud2, topics.LANDMARK_OBSERVATIONS, self._on_landmarks,
-                                 INPUT_QOS)
-        self.create_subscription(PoseWithCovarianceStamped, topics.INITIAL_POSE,
-                                 self._on_initial_pose, 10)
-        self.create_service(Trigger, "~/reset", self._on_reset)
         self.add_on_set_parameters_callback(self._on_set_parameters)
-        self.create_timer(self._settings.diagnostics_period, self._publish_diagnostics)
         self._initial = (self._settings.initial_pose, self._settings.initial_covariance)
+        self._tf_broadcaster: TransformBroadcaster | None = None
+        self.start_if_asked()
+
+    # --- lifecycle ---------------------------------------------------------------------------
+
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._pose_pub = self.create_lifecycle_publisher(PoseWithCovarianceStamped,
+                                                         topics.POSE, latched_qos(1))
+        self._diagnostics_pub = self.create_lifecycle_publisher(DiagnosticArray,
+                                                                topics.DIAGNOSTICS, 10)
+        self.configured_publishers = [self._pose_pub, self._diagnostics_pub]
+        if self.get_parameter("tf_broadcast").value:
+            self._tf_broadcaster = TransformBroadcaster(self)
+        self.configured_handles = [
+            self.create_subscription(Odometry, topics.ODOM, self._on_odom, INPUT_QOS),
+            self.create_subscription(PointCloud2, topics.LANDMARK_OBSERVATIONS,
+                                     self._on_landmarks, INPUT_QOS),
+            self.create_subscription(PoseWithCovarianceStamped, topics.INITIAL_POSE,
+                                     self._on_initial_pose, 10),
+            self.create_service(Trigger, "~/reset", self._on_reset),
+            self.create_timer(self._settings.diagnostics_period, self._publish_diagnostics)]
         self.get_logger().info(
             f"ready: {self._settings.model.kind.upper()} among {len(self._landmarks)} "
             f"landmarks, from ({self._initial[0][0]:.2f}, {self._initial[0][1]:.2f}, "
             f"{math.degrees(self._initial[0][2]):.0f} deg)")
+        return TransitionCallbackReturn.SUCCESS
+
+    def forget(self) -> None:
+        """At cleanup: the filter starts again from the initial pose."""
+        self._tf_broadcaster = None
+        self._restart()
 
     @property
     def localization(self) -> LandmarkLocalization | None:
@@ -120,14 +146,20 @@ class EkfLocalizer(Node):
     # --- inputs -----------------------------------------------------------------------------
 
     def _on_odom(self, msg: Odometry) -> None:
+        if not self.active:
+            return
         v, w = msg.twist.twist.linear.x, msg.twist.twist.angular.z
         stamp = stamp_or_none(msg.header.stamp)
         if not (math.isfinite(v) and math.isfinite(w)) or stamp is None:
             self._reject("bad_odom", f"odom dropped: twist ({v}, {w}) or stamp {stamp} unusable")
             return
-        self._submit(stamp, ODOM_RANK, ("odom", stamp / 1e9, v, w), "odom")
+        if self._submit(stamp, ODOM_RANK, ("odom", stamp / 1e9, v, w), "odom") \
+                and stamp == self._newest_ns:
+            self._broadcast(stamp, planar_pose(msg.pose.pose))
 
     def _on_landmarks(self, msg: PointCloud2) -> None:
+        if not self.active:
+            return
         stamp = stamp_or_none(msg.header.stamp)
         try:
             observations = landmark_points(msg)
@@ -139,7 +171,8 @@ class EkfLocalizer(Node):
             return
         self._submit(stamp, FRAME_RANK, ("frame", stamp / 1e9, observations), "frame")
 
-    def _submit(self, stamp: int, rank: int, event: tuple, kind: str) -> None:
+    def _submit(self, stamp: int, rank: int, event: tuple, kind: str) -> bool:
+        """Apply an event in its place and publish; False when it was dropped."""
         if self._order is None:
             self._start()
         assert self._order is not None and self._events is not None
@@ -148,7 +181,7 @@ class EkfLocalizer(Node):
             submission = self._order.submit(stamp, rank, event)
         except ValueError as error:
             self._reject(f"bad_{kind}", f"{kind} dropped: {error}")
-            return
+            return False
         self.handled[kind] += 1
         self._newest_ns = max(self._newest_ns, stamp)
         if submission.reordered:
@@ -157,6 +190,7 @@ class EkfLocalizer(Node):
             self.handled["events_too_late"] += 1
         self._nis.extend(o.nis for o in self._events.last_outcomes if math.isfinite(o.nis))
         self._publish()
+        return True
 
     def _start(self) -> None:
         """The filter from the initial pose, at the time of the earliest event it takes."""
@@ -166,6 +200,8 @@ class EkfLocalizer(Node):
                                   MAX_REORDER_EVENTS)
 
     def _on_initial_pose(self, msg: PoseWithCovarianceStamped) -> None:
+        if not self.active:
+            return
         try:
             pose, covariance = initial_pose_of(msg)
         except ValueError as error:
@@ -212,11 +248,26 @@ class EkfLocalizer(Node):
         msg.header.frame_id = self._settings.frame_id
         self._pose_pub.publish(msg)
 
+    def _broadcast(self, stamp: int, odometry: tuple[float, float, float]) -> None:
+        """map -> odom: the estimate at ``stamp`` with the odometry's own pose then taken
+        out, stamped ``transform_tolerance`` later."""
+        localization = self.localization
+        if self._tf_broadcaster is None or localization is None:
+            return
+        map_odom = Transform.planar(*localization.pose.tolist()) * \
+            Transform.planar(*odometry).inverse()
+        later = round(self.get_parameter("transform_tolerance").value * 1e9)
+        self._tf_broadcaster.send([to_message(
+            self._settings.frame_id, self.get_parameter("odom_frame_id").value,
+            stamp + later, map_odom)])
+
     def _reject(self, reason: str, message: str) -> None:
         self.rejected[reason] += 1
         self._warnings.warn(reason, f"{message} (rejected so far: {self.rejected[reason]})")
 
     def _publish_diagnostics(self) -> None:
+        if not self.active:
+            return
         values: dict[str, Any] = {"filter": self._settings.model.kind}
         localization = self.localization
         if localization is not None:

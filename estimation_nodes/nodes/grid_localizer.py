@@ -45,9 +45,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import Pose, PoseArray, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-from rclpy.service import Service
-from rclpy.timer import Timer
+from rclpy.lifecycle import LifecycleState, TransitionCallbackReturn
 from rclpy.time import Time
 from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Float64
@@ -61,6 +59,7 @@ from estimation_nodes.core.transforms.buffer import (Extrapolation, LookupFailed
                                                      TransformBuffer)
 from estimation_nodes.core.transforms.rigid import Transform
 from estimation_nodes.nodes.diagnostics import status_array
+from estimation_nodes.nodes.lifecycle import ManagedNode
 from estimation_nodes.nodes.grid_messages import (
     covariance_3x3,
     fill_pose,
@@ -109,7 +108,7 @@ TF_DEPTH = 5000
 PARTICLE_CLOUD_STATES = 500
 
 
-class GridLocalizer(LifecycleNode):
+class GridLocalizer(ManagedNode):
     """Where the robot is on the map, as an exact grid belief."""
 
     node_name = "grid_localizer"
@@ -126,19 +125,15 @@ class GridLocalizer(LifecycleNode):
         self.last_update_s = float("nan")
         #: The durations (s) of the latest updates, for /diagnostics' median and maximum.
         self.update_times: deque[float] = deque(maxlen=UPDATE_TIMES_KEPT)
-        self.active = False
         self.tf_buffer = TransformBuffer()
+        self._tf_listener: TransformListener | None = None
         #: map -> odom as of the last update (None before the first), sent again after each
         #: scan with its stamp, as AMCL does between updates.
         self._map_odom: Transform | None = None
         self._laser_mounts: dict[str, tuple[float, float, float]] = {}
         self._pending_initial_pose: PoseWithCovarianceStamped | None = None
         self._force_update = False
-        self._made: list[Any] = []
-        self._configured = False
-        if self.get_parameter("autostart").value:
-            self.trigger_configure()
-            self.trigger_activate()
+        self.start_if_asked()
 
     # --- lifecycle ---------------------------------------------------------------------------
 
@@ -164,7 +159,9 @@ class GridLocalizer(LifecycleNode):
             depth=TF_DEPTH) \
             if self._frames.odometry_from_tf else None
         self._tf_broadcaster = TransformBroadcaster(self) if self._frames.tf_broadcast else None
-        subscribe, made = self.create_subscription, self._made
+        self.configured_publishers = [self._pose_pub, self._belief_pub, self._quality_pub,
+                                      self._cloud_pub, self._diagnostics_pub]
+        subscribe, made = self.create_subscription, self.configured_handles
         if self._settings.model is None:
             made.append(subscribe(OccupancyGrid, topics.MAP, self._on_map, latched_qos(1)))
         # A scan is only worth its latest, while odometry is followed in order.
@@ -192,13 +189,11 @@ class GridLocalizer(LifecycleNode):
         self._waiting_scans: deque[tuple[LaserScan, int, float]] = deque()
         made.append(self.create_timer(min(SCAN_WAIT_CHECK_S, self._scan_wait_s() / 4),
                                       self._scan_waited_out))
-        self._configured = True
         if self._settings.model is not None:
             self._start(self._settings.model)
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.active = True
         result = super().on_activate(state)
         initial = self._frames.initial_pose
         if initial is not None and self.localization is not None:
@@ -210,35 +205,8 @@ class GridLocalizer(LifecycleNode):
         self._pending_initial_pose = None
         return result
 
-    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.active = False
-        return super().on_deactivate(state)
-
-    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self.active = False
-        self._release()
-        return TransitionCallbackReturn.SUCCESS
-
-    def _release(self) -> None:
-        """Undo on_configure: every handle it made, the belief and the tf buffer."""
-        if not self._configured:
-            return
-        self._configured = False
-        for handle in self._made:
-            if isinstance(handle, Timer):
-                self.destroy_timer(handle)
-            elif isinstance(handle, Service):
-                self.destroy_service(handle)
-            else:
-                self.destroy_subscription(handle)
-        self._made = []
-        for publisher in (self._pose_pub, self._belief_pub, self._quality_pub, self._cloud_pub,
-                          self._diagnostics_pub):
-            self.destroy_lifecycle_publisher(publisher)
+    def forget(self) -> None:
+        """At cleanup: the belief, the tf buffer and what was learnt of the mount."""
         if self._tf_listener is not None:
             self._tf_listener.destroy()
         self.tf_buffer = TransformBuffer()

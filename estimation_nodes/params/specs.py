@@ -476,7 +476,18 @@ EKF_LOCALIZER_SPECS = LANDMARK_MODEL_SPECS + (
               "rad, map frame)."),
     ParamSpec("initial_covariance", [1.0, 1.0, 0.25], "Variances of x, y and yaw it starts "
               "with (m^2, m^2, rad^2): 3 values (a diagonal) or 9 (row-major)."),
-    ParamSpec("frame_id", "map", "Frame of the published pose."),
+    ParamSpec("frame_id", "map", "Frame of the published pose and of map -> odom."),
+    ParamSpec("autostart", False, "Configure and activate at start, for running alone; "
+              "false: wait, unconfigured, for a lifecycle manager (Nav2's) to do it.",
+              read_only=True),
+    ParamSpec("odom_frame_id", "odom", "The frame of the odometry's poses (its header's).",
+              read_only=True),
+    ParamSpec("tf_broadcast", True, "Publish frame_id -> odom_frame_id on /tf after each "
+              "odometry message: the estimate composed with the inverse of that message's "
+              "pose, so the tree's map -> base_link is the estimate.", read_only=True),
+    ParamSpec("transform_tolerance", 0.1, "map -> odom is stamped this long (s) after its "
+              "odometry's time (AMCL's transform_tolerance).", read_only=True,
+              min_value=0.0, max_value=60.0),
     ParamSpec("reorder_horizon", 2.0, "Seconds of events kept to apply a late one in its "
               "place (odometry and camera frames come on two topics).", read_only=True,
               min_value=0.0, max_value=3600.0),

@@ -40,6 +40,7 @@ def localizer(context, executor, landmarks_file):
 
     def make(**values):
         values.setdefault("landmarks_file", str(landmarks_file))
+        values.setdefault("autostart", True)
         node = EkfLocalizer(context=context, parameter_overrides=[
             Parameter(k, value=v) for k, v in values.items()])
         executor.add_node(node)
@@ -194,3 +195,38 @@ def test_parameters_are_validated_at_run_time_and_reset_restarts(localizer, exec
     future = client.call_async(Trigger.Request())
     assert spin_until(executor, future.done, 10) and future.result().success
     assert node.localization is None
+
+
+@pytest.mark.timeout(60)
+def test_waits_for_its_lifecycle_and_puts_map_to_odom_on_tf(localizer, collector_factory,
+                                                             executor, context):
+    """Unconfigured until a lifecycle manager configures and activates it; then after an
+    odometry message, map -> odom on /tf composed with that message's pose is the pose."""
+    import rclpy.node
+    from tf2_msgs.msg import TFMessage
+
+    from estimation_nodes.core.transforms.rigid import Transform
+    from estimation_nodes.nodes.grid_messages import fill_pose
+    from estimation_nodes.nodes.tf import TF_QOS, from_message
+
+    node = localizer(autostart=False, transform_tolerance=0.0)
+    seen = collector_factory({"pose": PoseWithCovarianceStamped, "/tf": (TFMessage, TF_QOS)})
+    sender = rclpy.node.Node("odom_source", context=context)
+    executor.add_node(sender)
+    publisher = sender.create_publisher(Odometry, "odom", INPUT_QOS)
+    assert not node.active and not node.configured_handles         # nothing made before configure
+    node.trigger_configure()
+    assert node.configured_handles and not node.active
+    node.trigger_activate()
+    assert node.active
+    assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10.0)
+    msg = odom(T0, 0.5, 0.1)
+    fill_pose(msg.pose.pose, 3.0, -1.0, 0.7)       # where the wheels think the robot is
+    publisher.publish(msg)
+    assert spin_until(executor, lambda: seen.count("pose") and seen.count("/tf"), 10.0)
+    pose = planar_pose(seen.messages["pose"][-1].pose.pose)
+    parent, child, stamp_ns, map_odom = from_message(seen.messages["/tf"][-1].transforms[0])
+    assert (parent, child, stamp_ns) == ("map", "odom", int(T0 * 1e9))
+    composed = (map_odom * Transform.planar(3.0, -1.0, 0.7)).as_planar()
+    np.testing.assert_allclose(composed[:2], pose[:2], atol=1e-9)
+    assert abs(math.remainder(composed[2] - pose[2], 2 * math.pi)) < 1e-9
