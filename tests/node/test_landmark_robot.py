@@ -53,6 +53,7 @@ def test_the_localizer_follows_the_robot_where_odometry_drifts(nodes, executor,
                               "true_pose": (PoseStamped, latched_qos(1000)),
                               "odom": (Odometry, INPUT_QOS)})
     localizer = nodes(EkfLocalizer, filter=kind, initial_covariance=[0.01, 0.01, 0.01],
+                      autostart=True,
                       **NOISY)
     nodes(LandmarkRobot, seed=11, rate_hz=50.0, camera_rate_hz=5.0, **NOISY)
     assert spin_until(executor, lambda: localizer.handled["frame"] >= 60, 90), \

@@ -113,7 +113,7 @@ def test_a_carmen_log_becomes_a_recording_of_scans_odometry_and_truth(tmp_path, 
     assert "range_max 81.83 m" in capsys.readouterr().out
     topics = decoded(out)
     assert {t: len(m) for t, m in topics.items()} == {"/scan": 2, "/ground_truth": 2,
-                                                      "/odom": 6}
+                                                      "/odom": 6, "/tf": 6, "/tf_static": 1}
     scan = topics["/scan"][0][1]
     assert scan.angle_min == pytest.approx(-math.pi / 2)
     assert scan.angle_increment == pytest.approx(math.pi / 4)
@@ -128,6 +128,34 @@ def test_a_carmen_log_becomes_a_recording_of_scans_odometry_and_truth(tmp_path, 
     assert [stamp(m) for m in odom] == sorted(stamp(m) for m in odom)
     assert odom[-1].pose.pose.position.x == pytest.approx(RAW[3][0])
     assert odom[0].twist.twist.linear.x == pytest.approx(0.5)
+    # The tree a robot records: odom -> base_link at every odometry line, the laser's mount.
+    tree = [m.transforms[0] for _, m in topics["/tf"]]
+    assert [(t.header.frame_id, t.child_frame_id) for t in tree] == [("odom", "base_link")] * 6
+    assert [t.transform.translation.x for t in tree] == \
+        [o.pose.pose.position.x for o in odom]
+    mount = topics["/tf_static"][0][1].transforms[0]
+    assert (mount.header.frame_id, mount.child_frame_id) == ("base_link", "laser")
+    assert mount.transform.translation.x == 0.0
+
+
+def test_laser_ahead_puts_base_link_behind_the_laser(tmp_path):
+    """--laser-ahead 0.25: the mount 0.25 m forward; odometry, tree and truth are then
+    base_link's, 0.25 m behind the laser's poses along its heading; the scans unchanged."""
+    log_path = tmp_path / "run.log"
+    log_path.write_text(corrected_log())
+    plain, ahead = tmp_path / "plain.mcap", tmp_path / "ahead.mcap"
+    cli.main(["carmen", str(log_path), "-o", str(plain)])
+    cli.main(["carmen", str(log_path), "-o", str(ahead), "--laser-ahead", "0.25"])
+    before, after = decoded(plain), decoded(ahead)
+    assert after["/tf_static"][0][1].transforms[0].transform.translation.x == 0.25
+    for topic, pose_of in (("/odom", lambda m: m.pose.pose), ("/ground_truth",
+                                                               lambda m: m.pose)):
+        for (_, laser), (_, base) in zip(before[topic], after[topic]):
+            p, q = pose_of(laser), pose_of(base)
+            yaw = 2 * math.atan2(p.orientation.z, p.orientation.w)
+            assert q.position.x == pytest.approx(p.position.x - 0.25 * math.cos(yaw))
+            assert q.position.y == pytest.approx(p.position.y - 0.25 * math.sin(yaw))
+    assert [m.ranges for _, m in before["/scan"]] == [m.ranges for _, m in after["/scan"]]
 
 
 @pytest.mark.parametrize("content", [None, b"not a log\n", b"\x1f\x8b broken gzip"])
@@ -343,7 +371,8 @@ def test_a_log_whose_laser_pose_is_its_odometry_is_raw_and_has_no_truth(tmp_path
     assert "no /ground_truth: the laser pose equals the odometry pose on every scan line" \
         in capsys.readouterr().out
     topics = decoded(out)
-    assert sorted(topics) == ["/odom", "/scan"] and len(topics["/scan"]) == 3
+    assert sorted(topics) == ["/odom", "/scan", "/tf", "/tf_static"]
+    assert len(topics["/scan"]) == 3
     # with ODOM lines that never restart at a scan: raw too, the ODOM poses as they are
     text = path.read_text() + "ODOM 3.0 1.5 0.9 0.3 0.1 0 11.2 h 11.2\n"
     path.write_text(text)
@@ -419,7 +448,7 @@ def test_robotlaser1_lines_are_read_with_the_lasers_own_angles_and_range(tmp_pat
     assert "no /ground_truth: the laser pose is the odometry pose moved by one fixed mount " \
         "(x 0.200 m, y 0.000 m, yaw 0.0000 rad)" in printed
     topics = decoded(out)
-    assert sorted(topics) == ["/odom", "/scan"]
+    assert sorted(topics) == ["/odom", "/scan", "/tf", "/tf_static"]
     scan = topics["/scan"][1][1]
     assert stamp(scan) == pytest.approx(5.1)
     assert scan.angle_min == pytest.approx(-1.0) and scan.range_max == pytest.approx(30)
