@@ -371,3 +371,26 @@ def test_grid_localization_run_with_ros2_run_and_watched_with_the_cli(ros2, ros2
     assert localized, seen
     dropped = [i for i in range(localized[0], len(seen)) if seen[i] < 0.01]
     assert dropped and max(seen[dropped[0]:]) > 0.9, seen
+
+
+def test_grid_localizer_waits_for_ros2_lifecycle_then_answers_amcls_services(ros2, ros2_start,
+                                                                           tmp_path):
+    """As under Nav2: without autostart the node is unconfigured until `ros2 lifecycle set`
+    (what the lifecycle manager does) configures and activates it; AMCL's services then."""
+    document = yaml.safe_load((SCENARIOS / "grid_corridor.yaml").read_text())
+    del document["/**/grid_localizer"]["ros__parameters"]["autostart"]
+    (tmp_path / "corridor.yaml").write_text(yaml.safe_dump(document))
+    start_nodes(ros2, ros2_start, "grid_localizer",
+                args=("--ros-args", "--params-file", str(tmp_path / "corridor.yaml")))
+    state = ros2("lifecycle", "get", "--no-daemon", "--spin-time", "3", "/grid_localizer")
+    assert state.returncode == 0 and "unconfigured" in state.stdout, state.stdout
+    for transition in ("configure", "activate"):
+        changed = ros2("lifecycle", "set", "--no-daemon", "--spin-time", "3",
+                       "/grid_localizer", transition, timeout=120)
+        assert changed.returncode == 0 and "Transitioning successful" in changed.stdout, \
+            changed.stdout
+    state = ros2("lifecycle", "get", "--no-daemon", "--spin-time", "3", "/grid_localizer")
+    assert "active" in state.stdout and "inactive" not in state.stdout, state.stdout
+    called = ros2("service", "call", "/reinitialize_global_localization",
+                  "std_srvs/srv/Empty")
+    assert called.returncode == 0 and "response" in called.stdout, called.stdout
