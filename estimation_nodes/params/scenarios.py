@@ -22,7 +22,7 @@ import yaml
 
 from estimation_nodes.params.param_files import node_parameters
 
-KINDS = ("tiles", "linear_system", "grid", "landmarks")
+KINDS = ("tiles", "linear_system", "grid", "landmarks", "fusion")
 DEFAULT_KIND = "tiles"
 #: The section's node name.
 DEMO = "estimation_demo"

@@ -7,7 +7,7 @@ from tests.conftest import SCENARIOS
 
 EXPECTED = {"book_world": "tiles", "example_6_14": "tiles", "example_6_18": "tiles",
             "localization": "tiles", "tracking_2d": "linear_system", "grid_corridor": "grid",
-            "grid_localization": "grid", "landmarks": "landmarks"}
+            "grid_localization": "grid", "landmarks": "landmarks", "fusion": "fusion"}
 
 
 def test_every_shipped_scenario_says_its_kind():

@@ -175,6 +175,10 @@ def run_demo(argv: Sequence[str] | None) -> int:
         return 2
     if kind in ("grid", "landmarks"):
         return run_grid_scenario(params, args, kind)
+    if kind == "fusion":
+        from estimation_nodes.tools.demo import fusion_run
+
+        return fusion_run.run(params, args)
     runner = run_in_process if args.in_process else run_processes
     try:
         code, record = runner(params, args)

@@ -42,9 +42,11 @@ def stop_process(process: subprocess.Popen, grace: float = 5.0) -> int:
     return process.returncode
 
 
-def start_node(name: str, params: Path, *overrides: str) -> subprocess.Popen:
+def start_node(name: str, params: Path, *overrides: str,
+               command: Sequence[str] | None = None) -> subprocess.Popen:
     """The package's node ``name`` (nodes/start.py) as a child of this process, with its
-    parameter file and ``overrides`` (ROS arguments).
+    parameter file and ``overrides`` (ROS arguments); or ``command`` (a tool of the
+    package, such as estimation_play), started the same way.
 
     The child ends with this process even if it is killed (nodes/process.end_with_parent),
     and runs in a process group of its own: a terminal's Ctrl-C then reaches this process
@@ -53,8 +55,9 @@ def start_node(name: str, params: Path, *overrides: str) -> subprocess.Popen:
     """
     from estimation_nodes.nodes.process import PARENT_PID_ENV
 
-    command = [sys.executable, "-m", "estimation_nodes.nodes.start", name, "--ros-args",
-               "--params-file", str(params), *overrides]
+    if command is None:
+        command = [sys.executable, "-m", "estimation_nodes.nodes.start", name, "--ros-args",
+                   "--params-file", str(params), *overrides]
     # The child inherits this thread's signal mask: with SIGINT blocked, a stop sent while
     # Python is still starting up (before any code of ours could take it; it would print
     # "Fatal Python error") waits until nodes/start.py unblocks it.
@@ -80,6 +83,8 @@ class NodeStart:
     name: str
     overrides: tuple[str, ...] = ()
     ready: Callable[[Any], bool] | None = None
+    #: A tool's whole command line instead of a node's (see ``start_node``).
+    command: tuple[str, ...] | None = None
 
 
 def run_graph(params: Path, make_monitor: Callable[[], Any], starts: Sequence[NodeStart],
@@ -132,7 +137,8 @@ def run_graph(params: Path, make_monitor: Callable[[], Any], starts: Sequence[No
                     check_interrupt()
                     if any_ended():
                         break
-                processes[start.name] = start_node(start.name, params, *start.overrides)
+                processes[start.name] = start_node(start.name, params, *start.overrides,
+                                                   command=start.command)
             code = run_until_done(executor, processes, main, deadline, linger,
                                   interrupted=lambda: held.noted)
             check_interrupt()
