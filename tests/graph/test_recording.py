@@ -34,6 +34,9 @@ def record_run(ros_env, tmp_path, scenario, *extra):
          "--linger", "0.5", "--quiet", "--record", str(mcap_path), "--plot", str(png_path),
          *extra], env=ros_env, capture_output=True, text=True, timeout=180)
     assert result.returncode == 0, result.stdout + result.stderr
+    # The demo's own word that the recording holds every message published.
+    assert f"recorded to {mcap_path} (" in result.stdout and "none missing)" in result.stdout, \
+        result.stdout
     return mcap_path, png_path
 
 

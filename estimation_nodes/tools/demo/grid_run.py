@@ -147,7 +147,8 @@ class GridMonitor(Node):
         def on_raw(data: bytes, info: dict) -> None:
             received = time.time_ns()
             for sink in self._sinks:
-                sink.write(topic, data, received, info.get("source_timestamp") or received)
+                sink.write(topic, data, received, info.get("source_timestamp") or received,
+                           info.get("publication_sequence_number"))
         return on_raw
 
     def _on_truth(self, msg) -> None:

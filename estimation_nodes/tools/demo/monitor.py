@@ -28,8 +28,10 @@ BARS = " ▁▂▃▄▅▆▇█"
 class RawSink(Protocol):
     """Where raw messages go: the MCAP recorder, the Foxglove live view."""
 
-    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
-        """``topic`` as resolved; ``data`` the CDR bytes; receive and source times in ns."""
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int,
+              sequence: int | None = None) -> None:
+        """``topic`` as resolved; ``data`` the CDR bytes; receive and source times in ns;
+        ``sequence`` the publisher's number for the message (None: not known)."""
 
 
 def observer_qos(topic: str) -> QoSProfile | int:
@@ -126,8 +128,9 @@ class RunMonitor(Node):
         def on_raw(data: bytes, info: dict) -> None:
             received = time.time_ns()
             published = info.get("source_timestamp") or received
+            sequence = info.get("publication_sequence_number")
             for sink in self._sinks:
-                sink.write(resolved, data, received, published)
+                sink.write(resolved, data, received, published, sequence)
             if handle is not None:
                 handle(deserialize_message(data, msg_type))
                 self.record.stamp(topic, published)
