@@ -27,6 +27,7 @@ from estimation_nodes.tools.demo.graph_runtime import (
     run_graph,
     spin_until,
 )
+from estimation_nodes.tools.demo.overrides import node_overrides
 from estimation_nodes.tools.installed import share_dirs
 from estimation_nodes.tools.live_view.server import LiveViewError, parse_address
 from estimation_nodes.tools.recording.completeness import SequenceGaps
@@ -333,19 +334,28 @@ def make_monitor(args: argparse.Namespace, sinks: list):
 # --- running the graph -----------------------------------------------------------------------
 
 
+def demo_overrides(params: Path) -> dict[str, tuple[str, ...]]:
+    """What the demo adds to each node's parameters (overrides.py): its monitor among the
+    nodes the simulator and the commander wait for, the estimator's depth raised."""
+    text = params.read_text(encoding="utf-8")
+    return node_overrides(text, scenario_kind(text), monitor_hears_inputs=True)
+
+
 def run_processes(params: Path, args: argparse.Namespace
                   ) -> tuple[int, RunRecord, SequenceGaps | None]:
     """The estimator, the simulator, then the commander, each a process of its own."""
     simulator = simulator_for(params)
     heard = topics.ESTIMATOR_OUTPUTS + topics.SIMULATOR_OUTPUTS[simulator]
+    overrides = demo_overrides(params)
     sinks = make_sinks(params, args)
     try:
         code, monitor = run_graph(params, lambda: make_monitor(args, sinks), [
-            NodeStart("estimator"),
-            NodeStart(simulator),
+            NodeStart("estimator", overrides.get("estimator", ())),
+            NodeStart(simulator, overrides.get(simulator, ())),
             # Last, so it finds the others soonest; once the monitor hears the simulator's
             # and the estimator's first messages.
-            NodeStart("motion_commander", tuple(commander_overrides(args.settle, True)),
+            NodeStart("motion_commander", (*commander_overrides(args.settle, True),
+                                           *overrides.get("motion_commander", ())),
                       ready=lambda monitor: monitor.publishers_matched(heard)),
         ], "motion_commander", args.timeout, args.linger)
     finally:
@@ -356,8 +366,10 @@ def run_processes(params: Path, args: argparse.Namespace
 
 def run_in_process(params: Path, args: argparse.Namespace
                    ) -> tuple[int, RunRecord, SequenceGaps | None]:
+    # One process: each parameter reaches the one node here that declares it.
     ros_args = ["--ros-args", "--params-file", str(params),
-                *commander_overrides(args.settle, exit_when_done=False)]
+                *commander_overrides(args.settle, exit_when_done=False),
+                *(arg for node_args in demo_overrides(params).values() for arg in node_args)]
     executor = None
     nodes = []
     sinks: list = []

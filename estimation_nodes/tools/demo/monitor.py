@@ -20,6 +20,7 @@ from rclpy.serialization import deserialize_message
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.nodes.wire import from_state_message
 from estimation_nodes.params import topics
+from estimation_nodes.tools.demo.overrides import MONITOR
 from estimation_nodes.tools.recording.run_record import RunRecord
 
 BARS = " ▁▂▃▄▅▆▇█"
@@ -84,7 +85,7 @@ class RunMonitor(Node):
 
     def __init__(self, quiet: bool = False, sinks: Sequence[RawSink] = (),
                  sink_only_topics: Mapping[str, str] | None = None, **kwargs) -> None:
-        super().__init__("estimation_demo_monitor", **kwargs)
+        super().__init__(MONITOR, **kwargs)
         self.record = RunRecord()
         self._quiet = quiet
         self._sinks = tuple(sinks)
