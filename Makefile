@@ -22,7 +22,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ROS_DOMAIN_ID
 PYTEST_WORKERS ?= 2
 XDIST := -n $(PYTEST_WORKERS) --dist loadfile
 
-.PHONY: demo test test-under-load bench install clean
+.PHONY: demo test test-under-load replay-under-load bench install clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -47,6 +47,12 @@ test: $(STAMP)
 # them and ends each by its pid); LOAD_PROCESSES sets how many (default: one per core).
 test-under-load: $(STAMP)
 	VENV=$(VENV) PYTHON=$(PYTHON) .ci/test-under-load $(XDIST) $(PYTEST_ARGS)
+
+# Issue 35's acceptance: fresh recorded demo runs of each recorded kind, each replayed, with
+# one core kept busy by a process the script starts and ends by its pid; prints per scenario
+# how many replayed EQUAL (bench/replay_under_load.py; REPLAY_ARGS="--runs 2" for a quick one).
+replay-under-load: $(STAMP)
+	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/python bench/replay_under_load.py $(REPLAY_ARGS)
 
 # Benchmarks print tables of figures with ratios to references measured in the
 # same run (see bench/README.md); they assert nothing and take a few minutes.

@@ -113,8 +113,8 @@ class EkfLocalizer(ManagedNode):
     # --- lifecycle ---------------------------------------------------------------------------
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
-        self._pose_pub = self.create_lifecycle_publisher(PoseWithCovarianceStamped,
-                                                         topics.POSE, latched_qos(1))
+        self._pose_pub = self.create_lifecycle_publisher(
+            PoseWithCovarianceStamped, topics.POSE, latched_qos(self._values["history_depth"]))
         self._diagnostics_pub = self.create_lifecycle_publisher(DiagnosticArray,
                                                                 topics.DIAGNOSTICS, 10)
         self.configured_publishers = [self._pose_pub, self._diagnostics_pub]

@@ -44,6 +44,11 @@ class HeldPublisher:
     def held(self) -> int:
         return len(self._held)
 
+    @property
+    def hold_for(self) -> tuple[str, ...]:
+        """The nodes this publisher waits for (empty: any subscriber)."""
+        return self._hold_for
+
     def ready(self) -> bool:
         """Whether a message published now reaches every node it must.
 
@@ -96,13 +101,15 @@ def subscribe_when_ready(node: Node, publishers: list[HeldPublisher], hold: bool
     if not hold or all(publisher.ready() for publisher in publishers):
         subscribe()
         return
-    node.get_logger().info("waiting for the estimator to hear the readings before taking "
-                           "commands")
+    names = ", ".join(dict.fromkeys(name for p in publishers for name in p.hold_for)) \
+        or "a subscriber"
+    node.get_logger().info(f"waiting for {names} to hear the readings before taking "
+                           f"commands")
 
     def check() -> None:
         if all(publisher.ready() for publisher in publishers):
             node.destroy_timer(timer)
-            node.get_logger().info("the readings reach the estimator: taking commands")
+            node.get_logger().info(f"the readings reach {names}: taking commands")
             subscribe()
 
     timer = node.create_timer(HOLD_CHECK_PERIOD_S, check)

@@ -491,6 +491,11 @@ EKF_LOCALIZER_SPECS = LANDMARK_MODEL_SPECS + (
     ParamSpec("reorder_horizon", 2.0, "Seconds of events kept to apply a late one in its "
               "place (odometry and camera frames come on two topics).", read_only=True,
               min_value=0.0, max_value=3600.0),
+    ParamSpec("history_depth", 1,
+              "How many of the latest poses pose keeps for late subscribers "
+              "(transient_local): 1 hands a late `ros2 topic echo` the latest, as /amcl_pose "
+              "does; more replays that many, oldest first, and lets a busy subscriber catch "
+              "up without losing one.", read_only=True, min_value=1, max_value=100000),
     ParamSpec("diagnostics_period", 1.0, "Seconds between /diagnostics messages.",
               read_only=True, min_value=0.01, max_value=3600.0),
 )

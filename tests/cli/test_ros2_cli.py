@@ -300,18 +300,11 @@ def stamp_s(header: dict) -> float:
     return header["stamp"]["sec"] + header["stamp"]["nanosec"] * 1e-9
 
 
-def found_pose(pose: dict) -> dict | None:
-    """``pose`` if its position variance says the robot is found (the corridor's uniform
-    belief has tens of m²), else None.
-
-    A CI run's `echo --once` of the latched /pose (depth 1) printed the localizer's first,
-    uniform pose, stamped at its start, 1.5 s after an echo of /localization_quality had
-    printed 0.99, which the localizer publishes just before the pose that goes with it. Why
-    DDS handed that reader the older sample is not known; a user would ask again, and so
-    does this test. The distance to the truth below is still asserted.
-    """
+def is_found(pose: dict) -> bool:
+    """Whether ``pose``'s position variance says the robot is found (the corridor's uniform
+    belief has tens of m²)."""
     covariance = np.array(pose["pose"]["covariance"]).reshape(6, 6)
-    return pose if covariance[0, 0] + covariance[1, 1] < 4.0 else None
+    return covariance[0, 0] + covariance[1, 1] < 4.0
 
 
 @time_limit(240)
@@ -322,6 +315,12 @@ def test_grid_localization_run_with_ros2_run_and_watched_with_the_cli(ros2, ros2
     # clone's run did, after the reset below); the test is about the CLI, not about that.
     document = yaml.safe_load((SCENARIOS / "grid_corridor.yaml").read_text())
     document["/**"]["ros__parameters"]["laser_max_range"] = 12.0
+    # The outputs keep only their latest, as /amcl_pose does: `echo --once` of a
+    # transient_local topic gets the publisher's kept samples replayed oldest first and
+    # prints an old one (../shared/ROS-PACKAGING.md). With the 100 the scenario kept for
+    # the demo's recorder until issue 35, a CI run's echo of /pose printed the localizer's
+    # first, uniform pose, 1.5 s after an echo of /localization_quality had printed 0.99.
+    document["/**/grid_localizer"]["ros__parameters"]["history_depth"] = 1
     (tmp_path / "corridor.yaml").write_text(yaml.safe_dump(document))
     corridor = ("--ros-args", "--params-file", str(tmp_path / "corridor.yaml"))
     began = time.monotonic()
@@ -342,9 +341,9 @@ def test_grid_localization_run_with_ros2_run_and_watched_with_the_cli(ros2, ros2
         return echo(ros2, "/localization_quality", "std_msgs/msg/Float64")["data"]
 
     wait_for(lambda: quality() > 0.9, limit, "localization_quality above 0.9")
-    pose = wait_for(lambda: found_pose(echo(ros2, "/pose",
-                                            "geometry_msgs/msg/PoseWithCovarianceStamped")),
-                    limit, "a /pose of the found robot")
+    # The latest pose: the one published just after that quality, or a later one.
+    pose = echo(ros2, "/pose", "geometry_msgs/msg/PoseWithCovarianceStamped")
+    assert is_found(pose), pose
     truth = echo(ros2, "/true_pose", "geometry_msgs/msg/PoseStamped")
     assert pose["header"]["frame_id"] == "map"
     covariance = np.array(pose["pose"]["covariance"]).reshape(6, 6)

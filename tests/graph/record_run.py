@@ -42,7 +42,8 @@ class Kept:
         self.types = {topic: message_class(name) for topic, name in recorded.items()}
         self.messages: list[tuple[int, int, str, bytes]] = []
 
-    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int,
+              sequence: int | None = None) -> None:
         if topic in self.types:
             self.messages.append((publish_time_ns, log_time_ns, topic, data))
 

@@ -2,13 +2,15 @@
 
 import re
 import subprocess
+import threading
 
 import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from tests.graph.graph_tools import executable
+from tests.conftest import SCENARIOS, spin_until
+from tests.graph.graph_tools import executable, node_command
 from tests.unit.test_plot import png_size
 
 EXPECTED_TOPICS = {
@@ -34,6 +36,9 @@ def record_run(ros_env, tmp_path, scenario, *extra):
          "--linger", "0.5", "--quiet", "--record", str(mcap_path), "--plot", str(png_path),
          *extra], env=ros_env, capture_output=True, text=True, timeout=180)
     assert result.returncode == 0, result.stdout + result.stderr
+    # The demo's own word that the recording holds every message published.
+    assert f"recorded to {mcap_path} (" in result.stdout and "none missing)" in result.stdout, \
+        result.stdout
     return mcap_path, png_path
 
 
@@ -143,3 +148,92 @@ def test_replay_rejects_a_file_that_is_not_mcap(ros_env, tmp_path):
     result = subprocess.run([executable("estimation_replay"), str(bogus)], env=ros_env,
                             capture_output=True, text=True, timeout=60)
     assert result.returncode == 2 and "not a readable MCAP recording" in result.stderr
+
+
+class RobotLog:
+    """The lines a child prints (stdout and stderr together), read by a thread as they come."""
+
+    def __init__(self, process) -> None:
+        self.lines: list[str] = []
+        self._thread = threading.Thread(target=self._read, args=(process,), daemon=True)
+        self._thread.start()
+
+    def _read(self, process) -> None:
+        for line in process.stdout:
+            self.lines.append(line)
+
+    def said(self, *texts: str) -> bool:
+        return any(text in line for line in list(self.lines) for text in texts)
+
+
+class Stamps:
+    """A sink that keeps the header stamps of the scans and poses the monitor takes."""
+
+    def __init__(self) -> None:
+        from geometry_msgs.msg import PoseWithCovarianceStamped
+        from sensor_msgs.msg import LaserScan
+
+        self.types = {"/scan": LaserScan, "/pose": PoseWithCovarianceStamped}
+        self.stamps: dict[str, list[int]] = {topic: [] for topic in self.types}
+
+    def write(self, topic, data, log_time_ns, publish_time_ns, sequence=None) -> None:
+        from rclpy.serialization import deserialize_message
+
+        from estimation_nodes.tools.replay.grid_localizer import header_stamp_ns
+
+        if topic in self.types:
+            msg = deserialize_message(data, self.types[topic])
+            self.stamps[topic].append(header_stamp_ns(msg))
+
+    def past_first_update(self) -> bool:
+        """The localizer's start and first update are in, and a scan as late as that
+        update: the scans come in order, so its own is in too if it was ever to be."""
+        poses, scans = self.stamps["/pose"], self.stamps["/scan"]
+        return len(poses) >= 2 and bool(scans) and max(scans) >= poses[1]
+
+
+@pytest.mark.timeout(180)
+def test_a_late_recorder_named_by_the_demo_still_has_the_robots_first_scan(
+        processes, context, executor, tmp_path):
+    """The demo adds its monitor to the nodes the robot waits for (tools/demo/overrides.py):
+    a monitor that comes after the robot is up still records its whole run from the first
+    odometry and scan, so every scan the localizer took, and every pose it published."""
+    from estimation_nodes.tools.demo.grid_run import GridMonitor, topic_types
+    from estimation_nodes.tools.demo.overrides import GRID_MONITOR, node_overrides
+    from estimation_nodes.tools.recording.mcap import McapRunWriter
+    from estimation_nodes.tools.replay.grid_localizer import header_stamp_ns, recorded_records
+
+    text = (SCENARIOS / "grid_corridor.yaml").read_text()
+    params = tmp_path / "corridor.yaml"
+    params.write_text(text + "/**/planar_robot:\n  ros__parameters:\n    seed: 7\n"
+                      "    duration: 20.0\n")
+    overrides = node_overrides(text, "grid", monitor_hears_inputs=True)
+    processes(node_command("grid_localizer", params, *overrides["grid_localizer"]))
+    robot = processes(node_command("planar_robot", params, *overrides["planar_robot"]))
+    log = RobotLog(robot)
+    # The monitor comes once the robot is up and says whom it waits for; without the
+    # demo's monitor among them, once it has started moving (too late for its first scans).
+    assert spin_until(executor, lambda: log.said(GRID_MONITOR, "are heard: moving"), 90.0), \
+        "".join(log.lines)
+    path = tmp_path / "late.mcap"
+    writer = McapRunWriter(path, topic_types("grid"), {"parameters_yaml": text})
+    heard = Stamps()
+    monitor = GridMonitor(quiet=True, sinks=[writer, heard], context=context)
+    executor.add_node(monitor)
+    try:
+        assert spin_until(executor, heard.past_first_update, 120.0), \
+            ("".join(log.lines), heard.stamps)
+    finally:
+        executor.remove_node(monitor)
+        monitor.destroy_node()
+        writer.close()
+    assert writer.gaps.missing() == {}, writer.gaps.describe()
+    records, _ = recorded_records(path)
+    scans = {header_stamp_ns(r.msg) for r in records if r.topic == "/scan"}
+    stamps = [header_stamp_ns(r.msg) for r in records if r.topic == "/pose"]
+    # The first pose is the localizer's start (uniform belief); each one after it is an
+    # update with a scan, which the recording holds: the first one above all. (A pose
+    # stamped after the last scan recorded may have come in before its scan: not judged.)
+    assert scans and len(stamps) >= 2, (len(scans), stamps)
+    assert stamps[1] in scans
+    assert [stamp for stamp in stamps[1:] if stamp <= max(scans) and stamp not in scans] == []

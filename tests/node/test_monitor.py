@@ -2,6 +2,8 @@
 is taken for its own step and not for the next one."""
 
 import numpy as np
+import pytest
+from geometry_msgs.msg import PoseWithCovarianceStamped
 from std_msgs.msg import Float64MultiArray, Int64
 
 from estimation_nodes.nodes.qos import latched_qos
@@ -84,6 +86,57 @@ def test_the_grid_monitor_pairs_each_pose_with_its_own_quality(context, executor
         assert spin_until(executor, lambda: len(record.updates) == 3, 10.0)
         assert [u[3] for u in record.updates] == published
         assert [u[1] for u in record.updates] == [0.0, 1.0, 2.0]
+    finally:
+        executor.remove_node(source)
+        executor.remove_node(monitor)
+        source.destroy_node()
+        monitor.destroy_node()
+
+
+class Numbered:
+    """A sink that keeps what completeness.py makes of each message's sequence number."""
+
+    def __init__(self) -> None:
+        from estimation_nodes.tools.recording.completeness import SequenceGaps
+
+        self.gaps = SequenceGaps()
+        self.count = 0
+
+    def write(self, topic, data, log_time_ns, publish_time_ns, sequence=None) -> None:
+        self.gaps.note(topic, sequence)
+        self.count += 1
+
+
+@pytest.mark.parametrize("monitor_kind", ["tiles", "grid"])
+def test_a_monitor_that_matched_late_records_what_it_missed(context, executor, monitor_kind):
+    # A latched publisher keeping 3 of the 5 beliefs it published before the monitor
+    # matched: the monitor gets 3, 4 and 5, and its recording says 1 and 2 are missing.
+    from rclpy.node import Node
+
+    from estimation_nodes.tools.demo.grid_run import GridMonitor
+
+    source = Node("simulated_graph", context=context)
+    executor.add_node(source)
+    topic = topics.BELIEF if monitor_kind == "tiles" else topics.POSE
+    msg_type = Float64MultiArray if monitor_kind == "tiles" else PoseWithCovarianceStamped
+
+    def message():
+        return belief_at(1) if monitor_kind == "tiles" else PoseWithCovarianceStamped()
+
+    publisher = source.create_publisher(msg_type, topic, latched_qos(3))
+    for _ in range(5):
+        publisher.publish(message())
+    sink = Numbered()
+    monitor = RunMonitor(quiet=True, sinks=[sink], context=context) \
+        if monitor_kind == "tiles" else GridMonitor(quiet=True, sinks=[sink], context=context)
+    executor.add_node(monitor)
+    try:
+        assert spin_until(executor, lambda: sink.count == 3, 10.0)
+        assert sink.gaps.describe() == [f"/{topic}: 2 messages of 5 missing (sequence numbers "
+                                        f"1-2)"]
+        publisher.publish(message())
+        assert spin_until(executor, lambda: sink.count == 4, 10.0)
+        assert sink.gaps.missing() == {f"/{topic}": [(1, 2)]}
     finally:
         executor.remove_node(source)
         executor.remove_node(monitor)

@@ -27,8 +27,10 @@ from estimation_nodes.tools.demo.graph_runtime import (
     run_graph,
     spin_until,
 )
+from estimation_nodes.tools.demo.overrides import node_overrides
 from estimation_nodes.tools.installed import share_dirs
 from estimation_nodes.tools.live_view.server import LiveViewError, parse_address
+from estimation_nodes.tools.recording.completeness import SequenceGaps
 from estimation_nodes.tools.recording.mcap import RecordingError
 from estimation_nodes.tools.recording.run_record import RunRecord, summarize
 
@@ -181,7 +183,7 @@ def run_demo(argv: Sequence[str] | None) -> int:
         return fusion_run.run(params, args)
     runner = run_in_process if args.in_process else run_processes
     try:
-        code, record = runner(params, args)
+        code, record, gaps = runner(params, args)
     except RecordingError as error:
         print(f"estimation_demo: {error}", file=sys.stderr)
         return 2
@@ -191,7 +193,7 @@ def run_demo(argv: Sequence[str] | None) -> int:
     print(summarize(record))
     print(other_scenarios(params))
     if args.record:
-        print(f"estimation_demo: recorded to {args.record}")
+        code = report_recording(args.record, gaps, code)
     if args.plot:
         from estimation_nodes.tools.plot.estimator import render
 
@@ -241,7 +243,7 @@ def run_grid_scenario(params: Path, args: argparse.Namespace, kind: str) -> int:
     print(record.summary())
     print(other_scenarios(params))
     if args.record:
-        print(f"estimation_demo: recorded to {args.record}")
+        code = report_recording(args.record, recording_gaps(sinks), code)
     if args.plot and code == 0:
         try:
             print(f"estimation_demo: plot written to {render_run(args, kind)}")
@@ -295,6 +297,30 @@ def close_sinks(sinks: list) -> None:
         sink.close()
 
 
+def recording_gaps(sinks: list) -> SequenceGaps | None:
+    """What the recording among ``sinks`` holds of what was published (None: no recording)."""
+    from estimation_nodes.tools.recording.mcap import McapRunWriter
+
+    return next((sink.gaps for sink in sinks if isinstance(sink, McapRunWriter)), None)
+
+
+def report_recording(path: Path, gaps: SequenceGaps | None, code: int) -> int:
+    """Say at the end of the run whether the recording holds every message published (from
+    each publisher's first to the last recorded), not only at replay time; the exit code:
+    1 for a recording that misses some, else ``code``."""
+    missing = gaps.describe() if gaps is not None else []
+    if not missing:
+        recorded = f"{gaps.recorded} messages, " if gaps is not None else ""
+        print(f"estimation_demo: recorded to {path} ({recorded}none missing)")
+        return code
+    print(f"estimation_demo: recorded to {path}, but it misses messages that were published:",
+          file=sys.stderr)
+    for line in missing:
+        print(f"  {line}", file=sys.stderr)
+    print("  estimation_replay cannot compare what was computed from them", file=sys.stderr)
+    return code or 1
+
+
 def make_monitor(args: argparse.Namespace, sinks: list):
     """The monitor node, feeding ``sinks``."""
     from estimation_nodes.tools.demo.monitor import RunMonitor
@@ -308,28 +334,42 @@ def make_monitor(args: argparse.Namespace, sinks: list):
 # --- running the graph -----------------------------------------------------------------------
 
 
-def run_processes(params: Path, args: argparse.Namespace) -> tuple[int, RunRecord]:
+def demo_overrides(params: Path) -> dict[str, tuple[str, ...]]:
+    """What the demo adds to each node's parameters (overrides.py): its monitor among the
+    nodes the simulator and the commander wait for, the estimator's depth raised."""
+    text = params.read_text(encoding="utf-8")
+    return node_overrides(text, scenario_kind(text), monitor_hears_inputs=True)
+
+
+def run_processes(params: Path, args: argparse.Namespace
+                  ) -> tuple[int, RunRecord, SequenceGaps | None]:
     """The estimator, the simulator, then the commander, each a process of its own."""
     simulator = simulator_for(params)
     heard = topics.ESTIMATOR_OUTPUTS + topics.SIMULATOR_OUTPUTS[simulator]
+    overrides = demo_overrides(params)
     sinks = make_sinks(params, args)
     try:
         code, monitor = run_graph(params, lambda: make_monitor(args, sinks), [
-            NodeStart("estimator"),
-            NodeStart(simulator),
+            NodeStart("estimator", overrides.get("estimator", ())),
+            NodeStart(simulator, overrides.get(simulator, ())),
             # Last, so it finds the others soonest; once the monitor hears the simulator's
             # and the estimator's first messages.
-            NodeStart("motion_commander", tuple(commander_overrides(args.settle, True)),
+            NodeStart("motion_commander", (*commander_overrides(args.settle, True),
+                                           *overrides.get("motion_commander", ())),
                       ready=lambda monitor: monitor.publishers_matched(heard)),
         ], "motion_commander", args.timeout, args.linger)
     finally:
         close_sinks(sinks)
-    return code, monitor.record if monitor is not None else RunRecord()
+    return (code, monitor.record if monitor is not None else RunRecord(),
+            recording_gaps(sinks))
 
 
-def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunRecord]:
+def run_in_process(params: Path, args: argparse.Namespace
+                   ) -> tuple[int, RunRecord, SequenceGaps | None]:
+    # One process: each parameter reaches the one node here that declares it.
     ros_args = ["--ros-args", "--params-file", str(params),
-                *commander_overrides(args.settle, exit_when_done=False)]
+                *commander_overrides(args.settle, exit_when_done=False),
+                *(arg for node_args in demo_overrides(params).values() for arg in node_args)]
     executor = None
     nodes = []
     sinks: list = []
@@ -388,7 +428,7 @@ def run_in_process(params: Path, args: argparse.Namespace) -> tuple[int, RunReco
     if held.noted or code == INTERRUPTED:
         code = INTERRUPTED
         signal.signal(signal.SIGINT, signal.SIG_IGN)   # the summary is printed whole
-    return code, nodes[0].record if nodes else RunRecord()
+    return code, nodes[0].record if nodes else RunRecord(), recording_gaps(sinks)
 
 
 if __name__ == "__main__":

@@ -27,10 +27,11 @@ from rclpy.node import Node
 from std_msgs.msg import Float64
 
 from estimation_nodes.nodes.grid_messages import planar_pose
-from estimation_nodes.nodes.qos import latched_qos
+from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.nodes.stamps import published_ns
 from estimation_nodes.params import topics
 from estimation_nodes.tools.demo.graph_runtime import NodeStart, run_graph
+from estimation_nodes.tools.demo.overrides import GRID_MONITOR, node_overrides
 
 #: Within this of the truth an update counts as localized (the issue's 0.3 m and 10 deg).
 NEAR_M, NEAR_DEG = 0.3, 10.0
@@ -115,7 +116,7 @@ class GridMonitor(Node):
     """Subscribes to the run's grid topics; prints and keeps each update; feeds raw sinks."""
 
     def __init__(self, quiet: bool, sinks: list, kind: str = "grid", **kwargs: Any) -> None:
-        super().__init__("estimation_demo_grid_monitor", **kwargs)
+        super().__init__(GRID_MONITOR, **kwargs)
         self.record = GridRecord()
         #: Whether the localizer has published an estimate: it is ready for the robot.
         self.localizer_ready = False
@@ -137,9 +138,16 @@ class GridMonitor(Node):
     def _raw_subscriptions(self) -> None:
         from estimation_nodes.tools.demo.monitor import message_class, observer_qos
 
-        for topic, type_name in topic_types(self._kind).items():
-            qos = 10 if topic in ("/scan", "/odom", "/landmark_observations") \
-                else observer_qos(topic)
+        inputs = ("/scan", "/odom", "/landmark_observations")
+        # The robot's inputs last: it starts once it has matched this node on them
+        # (overrides.py), and DDS announces a node's subscriptions in the order they
+        # were made, so by then it has matched the truth's too.
+        ordered = sorted(topic_types(self._kind).items(), key=lambda item: item[0] in inputs)
+        for topic, type_name in ordered:
+            # The inputs 1000 deep, not 10: a monitor kept from its queue for a second
+            # (a busy machine) lost the oldest, and a recording without a scan the
+            # localizer took does not replay. observer_qos says why for the others.
+            qos = INPUT_QOS if topic in inputs else observer_qos(topic)
             self.create_subscription(message_class(type_name), topic, self._forward(topic),
                                      qos, raw=True)
 
@@ -147,7 +155,8 @@ class GridMonitor(Node):
         def on_raw(data: bytes, info: dict) -> None:
             received = time.time_ns()
             for sink in self._sinks:
-                sink.write(topic, data, received, info.get("source_timestamp") or received)
+                sink.write(topic, data, received, info.get("source_timestamp") or received,
+                           info.get("publication_sequence_number"))
         return on_raw
 
     def _on_truth(self, msg) -> None:
@@ -207,13 +216,17 @@ def run(params: Path, args, sinks: list, kind: str = "grid") -> tuple[int, GridR
     has published its first estimate; a landmark localizer listens to odometry); watch
     until the robot's duration is over."""
     localizer, robot = NODES[kind]
+    # The monitor hears the robot's odometry and readings only to record or serve them.
+    overrides = node_overrides(params.read_text(encoding="utf-8"), kind,
+                               monitor_hears_inputs=bool(sinks))
 
     def ready(monitor: GridMonitor) -> bool:
         return monitor.localizer_ready if kind == "grid" \
             else monitor.count_publishers(topics.POSE) > 0
     code, monitor = run_graph(params, lambda: GridMonitor(args.quiet, sinks, kind), [
-        NodeStart(localizer),
-        NodeStart(robot, ("-p", "exit_when_done:=true"), ready=ready),
+        NodeStart(localizer, overrides.get(localizer, ())),
+        NodeStart(robot, ("-p", "exit_when_done:=true", *overrides.get(robot, ())),
+                  ready=ready),
     ], robot, args.timeout, args.linger)
     if monitor is None:
         return code, GridRecord()

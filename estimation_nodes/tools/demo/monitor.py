@@ -20,6 +20,7 @@ from rclpy.serialization import deserialize_message
 from estimation_nodes.nodes.qos import INPUT_QOS, latched_qos
 from estimation_nodes.nodes.wire import from_state_message
 from estimation_nodes.params import topics
+from estimation_nodes.tools.demo.overrides import MONITOR
 from estimation_nodes.tools.recording.run_record import RunRecord
 
 BARS = " ▁▂▃▄▅▆▇█"
@@ -28,8 +29,10 @@ BARS = " ▁▂▃▄▅▆▇█"
 class RawSink(Protocol):
     """Where raw messages go: the MCAP recorder, the Foxglove live view."""
 
-    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
-        """``topic`` as resolved; ``data`` the CDR bytes; receive and source times in ns."""
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int,
+              sequence: int | None = None) -> None:
+        """``topic`` as resolved; ``data`` the CDR bytes; receive and source times in ns;
+        ``sequence`` the publisher's number for the message (None: not known)."""
 
 
 def observer_qos(topic: str) -> QoSProfile | int:
@@ -82,7 +85,7 @@ class RunMonitor(Node):
 
     def __init__(self, quiet: bool = False, sinks: Sequence[RawSink] = (),
                  sink_only_topics: Mapping[str, str] | None = None, **kwargs) -> None:
-        super().__init__("estimation_demo_monitor", **kwargs)
+        super().__init__(MONITOR, **kwargs)
         self.record = RunRecord()
         self._quiet = quiet
         self._sinks = tuple(sinks)
@@ -126,8 +129,9 @@ class RunMonitor(Node):
         def on_raw(data: bytes, info: dict) -> None:
             received = time.time_ns()
             published = info.get("source_timestamp") or received
+            sequence = info.get("publication_sequence_number")
             for sink in self._sinks:
-                sink.write(resolved, data, received, published)
+                sink.write(resolved, data, received, published, sequence)
             if handle is not None:
                 handle(deserialize_message(data, msg_type))
                 self.record.stamp(topic, published)

@@ -85,7 +85,8 @@ class LiveView:
                                  data=schema_text(type_name).encode())
         return foxglove.Channel(topic, schema=schema, message_encoding="cdr", context=context)
 
-    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int,
+              sequence: int | None = None) -> None:
         """Hand one raw message to every client subscribed to ``topic``; never blocks.
 
         Clients see ``log_time_ns`` (when the message arrived here) as its time, which is

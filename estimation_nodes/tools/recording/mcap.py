@@ -18,6 +18,7 @@ import numpy as np
 
 from estimation_nodes.params import topics
 from estimation_nodes.tools.installed import share_dirs
+from estimation_nodes.tools.recording.completeness import SequenceGaps
 from estimation_nodes.tools.recording.run_record import RunRecord
 
 METADATA_NAME = "estimation_nodes"
@@ -94,6 +95,8 @@ class McapRunWriter:
         self._writer.start(profile="ros2", library="estimation_nodes")
         self._channels: dict[str, int] = {}
         self._sequence = 0
+        #: What the recording lacks of what its publishers sent (completeness.py).
+        self.gaps = SequenceGaps()
         for topic, type_name in topics.items():
             schema = self._writer.register_schema(
                 name=type_name, encoding="ros2msg", data=schema_text(type_name).encode())
@@ -101,12 +104,15 @@ class McapRunWriter:
                 topic=topic, message_encoding="cdr", schema_id=schema)
         self._writer.add_metadata(METADATA_NAME, metadata)
 
-    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int) -> None:
-        """Add one raw message; a topic the file was not made with (/diagnostics, which
-        only the live view serves) is skipped."""
+    def write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int,
+              sequence: int | None = None) -> None:
+        """Add one raw message, ``sequence`` its publisher's number for it (None: unknown);
+        a topic the file was not made with (/diagnostics, which only the live view serves)
+        is skipped."""
         channel = self._channels.get(topic)
         if channel is None:
             return
+        self.gaps.note(topic, sequence)
         self._sequence += 1
         self._writer.add_message(channel, log_time=log_time_ns, data=data,
                                  publish_time=publish_time_ns, sequence=self._sequence)
