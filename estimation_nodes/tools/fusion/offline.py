@@ -37,8 +37,9 @@ class FusionRun:
 
 def bag_messages(path: Path, topics: set[str]):
     """(receive time ns, topic, message) in recorded order, from any bag ``rosbags`` reads
-    (the one bag reader: tools/recording/bags.py)."""
-    for timestamp, topic, _, msg in bags.bag_messages(path, topics):
+    (the one bag reader: tools/recording/bags.py), as ``rosbags`` decoded them: the inputs
+    read fields by name, as of an rclpy message."""
+    for timestamp, topic, _, msg in bags.bag_messages(path, topics, as_rclpy=False):
         yield timestamp, topic, msg
 
 
