@@ -1,6 +1,7 @@
-"""The fusion filter's compiled kernels (core/fusion/compiled.py) against the numpy steps they
-replace (steps.*_numpy): the same estimates to 1e-9, the same rejections and verdicts on
-covariances, and numpy's fallback where a covariance has no Cholesky factor."""
+"""The fusion filter's compiled kernels (core/fusion/compiled.py) against the numpy code they
+replace (steps.*_numpy, the inputs with compiled=False): the same estimates to 1e-9 and
+measurements to 1e-12, the same rejections and verdicts on covariances, and numpy's
+fallback where a covariance has no Cholesky factor."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import math
 import numpy as np
 import pytest
 
-from estimation_nodes.core.fusion import state, steps
+from estimation_nodes.core.fusion import inputs, state, steps
 from estimation_nodes.core.fusion.steps import Measurement, Rejected, UnscentedWeights
 
 WEIGHTS = UnscentedWeights()
@@ -145,3 +146,42 @@ def test_the_unscented_mean_is_exact_far_from_the_origin():
     predicted, _, _ = steps.ukf_predict(x, 0.01 * root @ root.T, np.zeros((15, 15)), 0.0,
                                         WEIGHTS)
     np.testing.assert_allclose(predicted[:3], exact, rtol=0.0, atol=1e-12)
+
+
+def random_mount(rng) -> inputs.Mount:
+    return inputs.Mount.from_rpy(tuple(rng.normal(size=3)), tuple(rng.uniform(-3, 3, 3)))
+
+
+def random_covariance(rng, size: int) -> np.ndarray:
+    root = rng.normal(size=(size, size))
+    return root @ root.T
+
+
+def assert_same_measurement(compiled, reference):
+    assert compiled.indices == reference.indices
+    np.testing.assert_allclose(compiled.z, reference.z, rtol=0.0, atol=1e-12)
+    np.testing.assert_allclose(compiled.covariance, reference.covariance, rtol=0.0,
+                               atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_the_inputs_kernels_equal_numpys(seed):
+    rng = np.random.default_rng(seed)
+    mount = random_mount(rng)
+    every = (True,) * 15
+    linear, angular, rates, alpha = (rng.normal(size=3) for _ in range(4))
+    twist6 = random_covariance(rng, 6)
+    assert_same_measurement(
+        inputs.twist(0, linear, angular, twist6, every, rates, mount),
+        inputs.twist(0, linear, angular, twist6, every, rates, mount, compiled=False))
+    attitude = state.rotation_from_rpy(*rng.uniform(-3, 3, 3))
+    covariance3 = random_covariance(rng, 3)
+    assert_same_measurement(
+        inputs.imu_orientation(0, attitude, covariance3, every, mount),
+        inputs.imu_orientation(0, attitude, covariance3, every, mount, compiled=False))
+    for seen_from, remove_gravity in ((attitude, True), (attitude, False), (None, True)):
+        assert_same_measurement(
+            inputs.acceleration(0, linear, covariance3, every, rates, alpha, seen_from,
+                                remove_gravity, inputs.GRAVITY, mount),
+            inputs.acceleration(0, linear, covariance3, every, rates, alpha, seen_from,
+                                remove_gravity, inputs.GRAVITY, mount, compiled=False))

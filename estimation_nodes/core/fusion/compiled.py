@@ -27,6 +27,7 @@ N = state.STATE_SIZE
 TWO_PI = 2.0 * math.pi
 _write_transfer = _jit(motion.write_transfer)
 _write_angle_derivatives = _jit(motion.write_angle_derivatives)
+_rpy_from_rotation = _jit(state.rpy_from_rotation)
 
 
 @_jit
@@ -332,6 +333,88 @@ def ukf_correct(x: FloatArray, p: FloatArray, points: FloatArray, z_full: FloatA
     return squared, x_new, p_new
 
 
+@_jit
+def _cross(a: FloatArray, b: FloatArray) -> tuple[float, float, float]:
+    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+
+@_jit
+def _turned(rotation: FloatArray, vector: FloatArray, row: int) -> float:
+    """Row ``row`` of R v."""
+    return rotation[row, 0] * vector[0] + rotation[row, 1] * vector[1] + \
+        rotation[row, 2] * vector[2]
+
+
+@_jit
+def _write_turned_covariance(rotation: FloatArray, covariance: FloatArray, out: FloatArray,
+                             start: int) -> None:
+    """out's block at (start, start) = B C B', B the rotation on each 3-block of C's
+    (C 3 x 3, or 6 x 6 for a pose or a twist)."""
+    n = covariance.shape[0]
+    turned = np.empty((n, n))
+    for a in range(n):
+        base = (a // 3) * 3
+        for d in range(n):
+            turned[a, d] = rotation[a % 3, 0] * covariance[base, d] + \
+                rotation[a % 3, 1] * covariance[base + 1, d] + \
+                rotation[a % 3, 2] * covariance[base + 2, d]
+    for a in range(n):
+        for b in range(n):
+            base = (b // 3) * 3
+            out[start + a, start + b] = turned[a, base] * rotation[b % 3, 0] + \
+                turned[a, base + 1] * rotation[b % 3, 1] + \
+                turned[a, base + 2] * rotation[b % 3, 2]
+
+
+@_jit
+def twist_values(rotation: FloatArray, origin: FloatArray, linear: FloatArray,
+                 angular: FloatArray, covariance6: FloatArray, rates: FloatArray
+                 ) -> tuple[FloatArray, FloatArray]:
+    """inputs.twist's z and covariance: v = R linear + o x omega, omega' = R angular, and
+    R C R' (R on both halves) in the twist's block."""
+    z = np.zeros(N)
+    covariance = np.zeros((N, N))
+    lever = _cross(origin, rates)
+    for i in range(3):
+        z[state.VX + i] = _turned(rotation, linear, i) + lever[i]
+        z[state.VROLL + i] = _turned(rotation, angular, i)
+    _write_turned_covariance(rotation, covariance6, covariance, state.VX)
+    return z, covariance
+
+
+@_jit
+def acceleration_values(rotation: FloatArray, origin: FloatArray, linear: FloatArray,
+                        covariance3: FloatArray, rates: FloatArray,
+                        angular_acceleration: FloatArray, attitude: FloatArray,
+                        gravity: float) -> tuple[FloatArray, FloatArray]:
+    """inputs.acceleration's z and covariance: a = R (linear - attitude' (0, 0, g)) + o x
+    alpha - (o x omega) x omega (g 0 to keep gravity), and R C R' in the acceleration's
+    block."""
+    felt = np.empty(3)
+    for i in range(3):
+        felt[i] = linear[i] - attitude[2, i] * gravity
+    tangential = _cross(origin, angular_acceleration)
+    centripetal = _cross(np.array(_cross(origin, rates)), rates)
+    z = np.zeros(N)
+    covariance = np.zeros((N, N))
+    for i in range(3):
+        z[state.AX + i] = _turned(rotation, felt, i) + tangential[i] - centripetal[i]
+    _write_turned_covariance(rotation, covariance3, covariance, state.AX)
+    return z, covariance
+
+
+@_jit
+def orientation_values(attitude: FloatArray, turn: FloatArray, covariance3: FloatArray
+                       ) -> tuple[FloatArray, FloatArray]:
+    """inputs.imu_orientation's z and covariance: the attitude's roll, pitch and yaw, and
+    T C T' (T the mount's yaw) in the orientation's block."""
+    z = np.zeros(N)
+    covariance = np.zeros((N, N))
+    z[state.ROLL], z[state.PITCH], z[state.YAW] = _rpy_from_rotation(attitude)
+    _write_turned_covariance(turn, covariance3, covariance, state.ROLL)
+    return z, covariance
+
+
 def warm_up() -> None:
     """Compile (or load from numba's cache) the kernels, with the argument types of the
     filter's calls."""
@@ -345,3 +428,7 @@ def warm_up() -> None:
     _, _, _, points = ukf_predict(x, p, p, 0.01, 1.0, weights, weights)
     sigma_points(x, p, 1.0)
     ukf_correct(x, p, points, x, p, idx, 1e-9, weights, weights)
+    three, rotation = np.zeros(3), np.eye(3)
+    twist_values(rotation, three, three, three, np.eye(6), three)
+    acceleration_values(rotation, three, three, rotation, three, three, rotation, 9.8)
+    orientation_values(rotation, rotation, rotation)

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,16 +43,15 @@ def prepare_compiled() -> bool:
     return load_kernels(COMPILED) is not None
 
 
-def _kernels(compiled: bool):
+def kernels(compiled: bool = True):
+    """compiled.py's module (compiled once), None where numba does not import or
+    ``compiled`` is False."""
     return load_kernels(COMPILED) if compiled else None
 
 
-def _index_array(measurement: "Measurement") -> np.ndarray:
-    return np.array(measurement.indices, dtype=np.int64)
-
-
-def _floats(array: FloatArray) -> FloatArray:
-    """The array as the kernels were compiled for (C-ordered doubles): no copy when it is."""
+def c_doubles(array: FloatArray) -> FloatArray:
+    """The array as the kernels were compiled for (C-ordered doubles): no copy when it is
+    (another layout would compile them anew)."""
     return np.ascontiguousarray(array, dtype=np.float64)
 
 
@@ -72,6 +71,13 @@ class Measurement:
     threshold: float = math.inf
     #: Where it came from ("odom0_twist", ...), for diagnostics.
     source: str = ""
+
+    #: ``indices`` as the kernels take them (made once: the check and the correction both
+    #: read them).
+    index_array: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "index_array", np.array(self.indices, dtype=np.int64))
 
 
 class Rejected(Exception):
@@ -99,10 +105,10 @@ def covariance_problem(measurement: Measurement, compiled: bool = True) -> str |
     positive semi-definite (the peer takes it as it is: an indefinite R can turn the
     innovation's covariance indefinite and the state's with it). The kernel proves the
     common case usable; what it cannot prove, numpy's eigenvalues decide."""
-    kernels = _kernels(compiled)
-    if kernels is not None:
-        verdict = kernels.covariance_verdict(_floats(measurement.covariance),
-                                             _index_array(measurement), MIN_VARIANCE,
+    compiled_steps = kernels(compiled)
+    if compiled_steps is not None:
+        verdict = compiled_steps.covariance_verdict(c_doubles(measurement.covariance),
+                                             measurement.index_array, MIN_VARIANCE,
                                              MATRIX_TOLERANCE)
         if verdict == 0:
             return None
@@ -138,9 +144,9 @@ def _reject_beyond(squared: float, threshold: float) -> None:
 def ekf_predict(x: FloatArray, p: FloatArray, q: FloatArray, dt: float,
                 compiled: bool = True) -> tuple[FloatArray, FloatArray]:
     """x' = F(x) x, P' = J P J' + dt Q."""
-    kernels = _kernels(compiled)
-    if kernels is not None:
-        return kernels.ekf_predict(_floats(x), _floats(p), _floats(q), float(dt))
+    compiled_steps = kernels(compiled)
+    if compiled_steps is not None:
+        return compiled_steps.ekf_predict(c_doubles(x), c_doubles(p), c_doubles(q), float(dt))
     return ekf_predict_numpy(x, p, q, dt)
 
 
@@ -155,11 +161,11 @@ def ekf_predict_numpy(x: FloatArray, p: FloatArray, q: FloatArray, dt: float
 def ekf_correct(x: FloatArray, p: FloatArray, measurement: Measurement,
                 compiled: bool = True) -> tuple[FloatArray, FloatArray]:
     """K = P H' (H P H' + R)^-1, x' = x + K y, P' = (I - K H) P (I - K H)' + K R K'."""
-    kernels = _kernels(compiled)
-    if kernels is not None:
-        squared, x_new, p_new = kernels.ekf_correct(
-            _floats(x), _floats(p), _floats(measurement.z), _floats(measurement.covariance),
-            _index_array(measurement), MIN_VARIANCE)
+    compiled_steps = kernels(compiled)
+    if compiled_steps is not None:
+        squared, x_new, p_new = compiled_steps.ekf_correct(
+            c_doubles(x), c_doubles(p), c_doubles(measurement.z),
+            c_doubles(measurement.covariance), measurement.index_array, MIN_VARIANCE)
         _reject_beyond(squared, measurement.threshold)
         return x_new, p_new
     return ekf_correct_numpy(x, p, measurement)
@@ -189,7 +195,7 @@ class UnscentedWeights:
     kappa: float = 0.0
     beta: float = 2.0
 
-    @property
+    @functools.cached_property
     def lam(self) -> float:
         return self.alpha * self.alpha * (STATE_SIZE + self.kappa) - STATE_SIZE
 
@@ -248,10 +254,10 @@ def ukf_predict(x: FloatArray, p: FloatArray, q: FloatArray, dt: float,
                 weights: UnscentedWeights, compiled: bool = True
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Propagate the sigma points; (x', P', the propagated points)."""
-    kernels = _kernels(compiled)
-    if kernels is not None:
-        drawn, x_new, p_new, points = kernels.ukf_predict(
-            _floats(x), _floats(p), _floats(q), float(dt), STATE_SIZE + weights.lam,
+    compiled_steps = kernels(compiled)
+    if compiled_steps is not None:
+        drawn, x_new, p_new, points = compiled_steps.ukf_predict(
+            c_doubles(x), c_doubles(p), c_doubles(q), float(dt), STATE_SIZE + weights.lam,
             weights.mean, weights.covariance)
         if drawn:
             return x_new, p_new, points
@@ -275,17 +281,17 @@ def ukf_correct(x: FloatArray, p: FloatArray, measurement: Measurement,
                 weights: UnscentedWeights, points: FloatArray | None, compiled: bool = True
                 ) -> tuple[FloatArray, FloatArray]:
     """Correct with ``points`` (the propagated ones), or new ones from (x, P) when None."""
-    kernels = _kernels(compiled)
-    if kernels is None:
+    compiled_steps = kernels(compiled)
+    if compiled_steps is None:
         return ukf_correct_numpy(x, p, measurement, weights, points)
-    x, p = _floats(x), _floats(p)
+    x, p = c_doubles(x), c_doubles(p)
     if points is None:
-        drawn, points = kernels.sigma_points(x, p, STATE_SIZE + weights.lam)
+        drawn, points = compiled_steps.sigma_points(x, p, STATE_SIZE + weights.lam)
         if not drawn:
             points = sigma_points(x, p, weights)
-    squared, x_new, p_new = kernels.ukf_correct(
-        x, p, _floats(points), _floats(measurement.z), _floats(measurement.covariance),
-        _index_array(measurement), MIN_VARIANCE, weights.mean, weights.covariance)
+    squared, x_new, p_new = compiled_steps.ukf_correct(
+        x, p, c_doubles(points), c_doubles(measurement.z), c_doubles(measurement.covariance),
+        measurement.index_array, MIN_VARIANCE, weights.mean, weights.covariance)
     _reject_beyond(squared, measurement.threshold)
     return x_new, p_new
 
