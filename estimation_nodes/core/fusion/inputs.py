@@ -23,7 +23,6 @@ that the mount turns into another one measures that one.
 
 from __future__ import annotations
 
-import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -43,6 +42,8 @@ GRAVITY = 9.80665
 PLANAR_ZEROS = (Z, ROLL, PITCH, VZ, VROLL, VPITCH, AZ)
 #: The variance the peer gives those zeros.
 PLANAR_VARIANCE = 1e-6
+#: PLANAR_ZEROS as an index array, made once (a two_d_mode filter uses it per reading).
+_PLANAR_INDEX = np.array(PLANAR_ZEROS)
 
 
 @dataclass(frozen=True)
@@ -265,15 +266,15 @@ def force_two_d(measurement: Measurement) -> Measurement:
     Their cross terms with the other entries are zeroed. The peer keeps the message's,
     which belong to the values replaced and can leave R indefinite.
     """
-    zeros = list(PLANAR_ZEROS)
     z = measurement.z.copy()
-    z[zeros] = 0.0
+    z[_PLANAR_INDEX] = 0.0
     covariance = measurement.covariance.copy()
-    covariance[zeros, :] = 0.0
-    covariance[:, zeros] = 0.0
-    covariance[zeros, zeros] = PLANAR_VARIANCE
-    indices = tuple(sorted(set(measurement.indices) | set(PLANAR_ZEROS)))
-    return dataclasses.replace(measurement, z=z, covariance=covariance, indices=indices)
+    covariance[_PLANAR_INDEX, :] = 0.0
+    covariance[:, _PLANAR_INDEX] = 0.0
+    covariance[_PLANAR_INDEX, _PLANAR_INDEX] = PLANAR_VARIANCE
+    indices = tuple(sorted(set(measurement.indices).union(PLANAR_ZEROS)))
+    return Measurement(measurement.stamp_ns, z, covariance, indices, measurement.threshold,
+                       measurement.source)
 
 
 def _only(mask: list[bool], part: slice) -> list[bool]:
