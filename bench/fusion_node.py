@@ -125,11 +125,11 @@ def start(target: str, bag: str, kind: str, inputs: dict[str, str], work: Path,
                    *(f"{topic}:{k}" for topic, k in inputs.items())]
     else:
         params = FILES / f"test_{kind}_localization_node_bag{BAGS[bag]}.yaml"
-        mounts = f'["{HUSKY_IMU_MOUNT}"]' if bag == "test1.bag" else "[]"
+        # (an empty list on the command line has no type rclpy can declare: none given)
+        mounts = ["-p", f'sensor_mounts:=["{HUSKY_IMU_MOUNT}"]'] if bag == "test1.bag" else []
         command = [executable(f"{kind}_node"), "--ros-args", "-r",
                    f"__node:={node_name(params)}", "--params-file", str(params),
-                   "-p", "use_sim_time:=false", "-p", f"sensor_mounts:={mounts}",
-                   "--log-level", "warn"]
+                   "-p", "use_sim_time:=false", *mounts, "--log-level", "warn"]
     return subprocess.Popen(command, env=env, stdout=log.open("w"), stderr=subprocess.STDOUT)
 
 
