@@ -37,6 +37,7 @@ from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Imu
 
+from estimation_nodes.core.fusion import steps
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
@@ -88,6 +89,9 @@ class FusionNode(Node):
             raise ConfigurationError(str(error)) from None
         for name in self._config.unsupported:
             self.get_logger().warning(f"parameter {name} is not supported yet: ignored")
+        # The steps' kernels compiled (or loaded from numba's cache) now, not at the
+        # first message.
+        steps.prepare_compiled()
         self._fusion = FusionFilter(self._config.settings)
         self._given_mounts = mounts
         self._inputs = self._config.sensor_inputs(mounts)

@@ -21,6 +21,7 @@ import pytest
 
 from estimation_nodes.params.fusion import fusion_config, parameters_of_file
 from estimation_nodes.tools.fusion import offline
+from estimation_nodes.tools.recording import bags
 
 SHARED = Path(__file__).resolve().parents[3] / "shared" / "data" / "robot_localization"
 FILES = Path(__file__).resolve().parents[1] / "data" / "robot_localization"
@@ -61,6 +62,23 @@ def test_the_peers_bag_test_passes_in_process(bag, kind, expected, tolerance):
     assert result.fusion.counts.rejected == {}
     assert np.all(np.isfinite(result.fusion.p))
     assert math.isfinite(float(np.trace(result.fusion.p)))
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/robot_localization is absent")
+def test_the_offline_run_reads_the_bags_messages_as_the_node_receives_them():
+    """estimation_fuse takes the messages as rosbags decoded them (no copy into rclpy's
+    classes): the run is the same, to the bit, as on the rclpy messages the node gets."""
+    config = fusion_config(parameters_of_file(
+        str(FILES / "test_ekf_localization_node_bag2.yaml")))
+    topics = {sensor.topic for sensor in config.sensors.values()}
+    decoded = offline.run(config, offline.bag_messages(SHARED / "test2.bag", topics))
+    as_rclpy = offline.run(config, ((stamp, topic, msg) for stamp, topic, _, msg
+                                    in bags.bag_messages(SHARED / "test2.bag", topics)))
+    assert len(decoded.outputs) == len(as_rclpy.outputs) > 3000
+    for (stamp, x), (stamp_rclpy, x_rclpy) in zip(decoded.outputs, as_rclpy.outputs):
+        assert stamp == stamp_rclpy
+        np.testing.assert_array_equal(x, x_rclpy)
+    np.testing.assert_array_equal(decoded.fusion.p, as_rclpy.fusion.p)
 
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/robot_localization is absent")

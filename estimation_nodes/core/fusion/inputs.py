@@ -23,7 +23,7 @@ that the mount turns into another one measures that one.
 
 from __future__ import annotations
 
-import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -32,7 +32,8 @@ import numpy as np
 from estimation_nodes.core.fusion.state import (
     ACCELERATION, AX, AZ, ORIENTATION, PITCH, POSE, ROLL, STATE_SIZE, TWIST, VPITCH, VROLL,
     VX, VZ, X, Z, rotation_from_quaternion, rotation_from_rpy, rpy_from_rotation, wrap)
-from estimation_nodes.core.fusion.steps import Measurement
+from estimation_nodes.core.fusion import steps
+from estimation_nodes.core.fusion.steps import Measurement, c_doubles
 from estimation_nodes.core.validation import FloatArray
 
 #: Standard gravity (m/s^2), robot_localization's default ``gravitational_acceleration``.
@@ -41,15 +42,52 @@ GRAVITY = 9.80665
 PLANAR_ZEROS = (Z, ROLL, PITCH, VZ, VROLL, VPITCH, AZ)
 #: The variance the peer gives those zeros.
 PLANAR_VARIANCE = 1e-6
+#: PLANAR_ZEROS as an index array, made once (a two_d_mode filter uses it per reading).
+_PLANAR_INDEX = np.array(PLANAR_ZEROS)
 
 
 @dataclass(frozen=True)
 class Mount:
     """Where a frame sits in another: its rotation and origin there. A sensor's frame on the
-    robot, a pose input's frame in the world, or a pose itself (the body's frame)."""
+    robot, a pose input's frame in the world, or a pose itself (the body's frame).
+
+    What follows from the rotation alone (its angles, its yaw, the 6 x 6 block rotation, the
+    masks it turns) is computed once per mount and kept: a sensor's mount serves every
+    message, so its arrays are never changed in place."""
 
     rotation: FloatArray = field(default_factory=lambda: np.eye(3))
     origin: FloatArray = field(default_factory=lambda: np.zeros(3))
+
+    @functools.cached_property
+    def rpy(self) -> tuple[float, float, float]:
+        """The rotation's roll, pitch and yaw (tf2's getRPY)."""
+        return rpy_from_rotation(self.rotation)
+
+    @functools.cached_property
+    def yaw_turn(self) -> "Mount":
+        """The rotation's yaw alone, at no origin."""
+        return Mount(rotation_from_rpy(0.0, 0.0, self.rpy[2]))
+
+    @functools.cached_property
+    def rows(self) -> tuple[tuple[float, ...], ...]:
+        """The rotation's rows as Python floats."""
+        return tuple(tuple(row) for row in self.rotation.tolist())
+
+    @functools.cached_property
+    def six(self) -> FloatArray:
+        """The rotation on both halves of a 6-vector (a pose or a twist)."""
+        six = np.zeros((6, 6))
+        six[:3, :3] = six[3:, 3:] = self.rotation
+        return six
+
+    def masked(self, mask: tuple[bool, ...]) -> list[bool]:
+        """Which axes a mask of three, turned by the rotation, touches (the peer's row-length
+        test): row i of R diag(mask) has the length sqrt(sum_j R_ij^2 mask_j)."""
+        known = self.__dict__.setdefault("_masks", {})
+        if mask not in known:
+            lengths = np.sqrt((self.rotation * self.rotation) @ np.asarray(mask, dtype=float))
+            known[mask] = [bool(length >= 1e-6) for length in lengths]
+        return list(known[mask])
 
     @classmethod
     def from_rpy(cls, xyz: tuple[float, float, float], rpy: tuple[float, float, float]
@@ -67,47 +105,43 @@ class Mount:
 IDENTITY = Mount()
 
 
-def _masked(rotation: FloatArray, mask: tuple[bool, ...]) -> list[bool]:
-    """Which axes a rotated mask still touches (the peer's row-length test)."""
-    # Row i of R diag(mask) has the length sqrt(sum_j R_ij^2 mask_j).
-    lengths = np.sqrt((rotation * rotation) @ np.asarray(mask, dtype=float))
-    return [bool(length >= 1e-6) for length in lengths]
-
-
 def _measurement(stamp_ns: int, z: FloatArray, covariance: FloatArray, mask: list[bool],
                  threshold: float, source: str) -> Measurement | None:
-    indices = tuple(i for i in range(STATE_SIZE) if mask[i] and math.isfinite(z[i]))
+    values = z.tolist()
+    indices = tuple(i for i in range(STATE_SIZE) if mask[i] and math.isfinite(values[i]))
     if not indices:
         return None
     return Measurement(stamp_ns, z, covariance, indices, threshold, source)
 
 
 def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
-    """a x b for 3-vectors (numpy's cross costs more than the rest of a reading)."""
-    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2],
-                     a[0] * b[1] - a[1] * b[0]])
-
-
-def _block_rotation(rotation: FloatArray) -> FloatArray:
-    six = np.zeros((6, 6))
-    six[:3, :3] = six[3:, 3:] = rotation
-    return six
+    """a x b for 3-vectors (numpy's cross costs more than the rest of a reading; so do
+    numpy's scalars: the products are of Python floats)."""
+    a0, a1, a2 = a.tolist()
+    b0, b1, b2 = b.tolist()
+    return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
 def twist(stamp_ns: int, linear: FloatArray, angular: FloatArray, covariance6: FloatArray,
           update: tuple[bool, ...], state_rates: FloatArray, mount: Mount = IDENTITY,
-          threshold: float = math.inf, source: str = "") -> Measurement | None:
+          threshold: float = math.inf, source: str = "", compiled: bool = True
+          ) -> Measurement | None:
     """A twist (linear and angular velocity in the sensor's frame) as a measurement."""
     r = mount.rotation
-    z = np.zeros(STATE_SIZE)
-    z[VX:VX + 3] = r @ linear + _cross(mount.origin, state_rates)
-    z[VROLL:VROLL + 3] = r @ angular
-    covariance = np.zeros((STATE_SIZE, STATE_SIZE))
-    rot6 = _block_rotation(r)
-    covariance[TWIST, TWIST] = rot6 @ covariance6 @ rot6.T
+    kernels = steps.kernels(compiled)
+    if kernels is not None:
+        z, covariance = kernels.twist_values(*map(c_doubles, (
+            r, mount.origin, linear, angular, covariance6, state_rates)))
+    else:
+        z = np.zeros(STATE_SIZE)
+        z[VX:VX + 3] = r @ linear + _cross(mount.origin, state_rates)
+        z[VROLL:VROLL + 3] = r @ angular
+        covariance = np.zeros((STATE_SIZE, STATE_SIZE))
+        rot6 = mount.six
+        covariance[TWIST, TWIST] = rot6 @ covariance6 @ rot6.T
     mask = list(update)
-    mask[VX:VX + 3] = _masked(r, tuple(update[VX:VX + 3]))
-    mask[VROLL:VROLL + 3] = _masked(r, tuple(update[VROLL:VROLL + 3]))
+    mask[VX:VX + 3] = mount.masked(tuple(update[VX:VX + 3]))
+    mask[VROLL:VROLL + 3] = mount.masked(tuple(update[VROLL:VROLL + 3]))
     return _measurement(stamp_ns, z, covariance, _only(mask, TWIST), threshold, source)
 
 
@@ -121,32 +155,33 @@ def pose(stamp_ns: int, body: Mount, covariance6: FloatArray, update: tuple[bool
     z = np.zeros(STATE_SIZE)
     z[X:X + 3] = placed.origin
     z[ROLL:ROLL + 3] = rpy_from_rotation(placed.rotation)
-    rot6 = _block_rotation(frame.rotation)
+    rot6 = frame.six
     covariance = np.zeros((STATE_SIZE, STATE_SIZE))
     covariance[POSE, POSE] = rot6 @ covariance6 @ rot6.T
     mask = list(update)
-    mask[X:X + 3] = _masked(frame.rotation, tuple(update[X:X + 3]))
-    mask[ROLL:ROLL + 3] = _masked(frame.rotation, tuple(update[ROLL:ROLL + 3]))
+    mask[X:X + 3] = frame.masked(tuple(update[X:X + 3]))
+    mask[ROLL:ROLL + 3] = frame.masked(tuple(update[ROLL:ROLL + 3]))
     return _measurement(stamp_ns, z, covariance, _only(mask, POSE), threshold, source)
 
 
 def pose_change(stamp_ns: int, previous: Mount, current: Mount, dt: float,
                 covariance6: FloatArray, update: tuple[bool, ...], threshold: float = math.inf,
-                source: str = "", turn: FloatArray | None = None) -> Measurement | None:
+                source: str = "", turn: Mount | None = None) -> Measurement | None:
     """Two consecutive poses ``dt`` apart as the twist that moves ``previous`` to ``current``
     (the peer's ``_differential``): the change previous^-1 current, in the previous pose's
     frame, over dt: its translation / dt and its roll, pitch, yaw / dt.
 
     ``covariance6`` is the sum of the two poses' covariances; the twist's is that times dt,
     as the peer has it. The pose entries of ``update`` say which rates are measured. An
-    IMU's ``turn`` (``imu_turn``) turns the mask and the covariance, as for its attitude.
+    IMU's ``turn`` (its mount's ``yaw_turn``) turns the mask and the covariance, as for its
+    attitude.
     """
     change = previous.inverse() * current
     if turn is not None:
-        rot6 = _block_rotation(turn)
+        rot6 = turn.six
         covariance6 = rot6 @ covariance6 @ rot6.T
-        update = (*_masked(turn, tuple(update[X:X + 3])),
-                  *_masked(turn, tuple(update[ROLL:ROLL + 3])))
+        update = (*turn.masked(tuple(update[X:X + 3])),
+                  *turn.masked(tuple(update[ROLL:ROLL + 3])))
     twist_update = [False] * STATE_SIZE
     twist_update[TWIST] = update[POSE]
     return twist(stamp_ns, change.origin / dt,
@@ -154,37 +189,37 @@ def pose_change(stamp_ns: int, previous: Mount, current: Mount, dt: float,
                  tuple(twist_update), np.zeros(3), IDENTITY, threshold, source)
 
 
-def imu_turn(mount: Mount) -> FloatArray:
-    """The mount's yaw alone: what turns an IMU's roll and pitch, their mask and their
-    covariance into the robot's (a sideways IMU's pitch is the robot's roll)."""
-    return rotation_from_rpy(0.0, 0.0, rpy_from_rotation(mount.rotation)[2])
-
-
 def imu_attitude(quaternion: tuple[float, float, float, float], mount: Mount) -> FloatArray:
     """An IMU's attitude (x, y, z, w, in the world frame) as the robot's, a rotation: the
     mount's angles taken off (roll, pitch and yaw minus the mount's), the roll/pitch pair
     turned by the mount's yaw, as the peer does (not a frame change)."""
-    roll0, pitch0, yaw0 = rpy_from_rotation(mount.rotation)
+    roll0, pitch0, yaw0 = mount.rpy
     roll, pitch, yaw = rpy_from_rotation(rotation_from_quaternion(*quaternion))
-    offsets = np.array([wrap(roll - roll0), wrap(pitch - pitch0), wrap(yaw - yaw0)])
-    return rotation_from_rpy(*(imu_turn(mount) @ offsets))
+    offsets = (wrap(roll - roll0), wrap(pitch - pitch0), wrap(yaw - yaw0))
+    # T offsets over Python floats: numpy's product and its scalars cost more on three.
+    turned = (sum(t * o for t, o in zip(row, offsets)) for row in mount.yaw_turn.rows)
+    return rotation_from_rpy(*turned)
 
 
 def imu_orientation(stamp_ns: int, attitude: FloatArray, covariance3: FloatArray,
                     update: tuple[bool, ...], mount: Mount = IDENTITY,
-                    threshold: float = math.inf, source: str = "") -> Measurement | None:
+                    threshold: float = math.inf, source: str = "", compiled: bool = True
+                    ) -> Measurement | None:
     """An IMU's attitude (``imu_attitude``, maybe relative to its first) as a roll, pitch,
-    yaw measurement; its covariance and mask turned by the mount's yaw."""
-    turn = imu_turn(mount)
-    z = np.zeros(STATE_SIZE)
-    z[ROLL:ROLL + 3] = rpy_from_rotation(attitude)
-    covariance6 = np.zeros((6, 6))
-    covariance6[3:, 3:] = covariance3
-    rot6 = _block_rotation(turn)
-    covariance = np.zeros((STATE_SIZE, STATE_SIZE))
-    covariance[POSE, POSE] = rot6 @ covariance6 @ rot6.T
+    yaw measurement; its covariance and mask turned by the mount's yaw (``yaw_turn``: a
+    sideways IMU's pitch is the robot's roll)."""
+    turn = mount.yaw_turn
+    kernels = steps.kernels(compiled)
+    if kernels is not None:
+        z, covariance = kernels.orientation_values(*map(c_doubles, (
+            attitude, turn.rotation, covariance3)))
+    else:
+        z = np.zeros(STATE_SIZE)
+        z[ROLL:ROLL + 3] = rpy_from_rotation(attitude)
+        covariance = np.zeros((STATE_SIZE, STATE_SIZE))
+        covariance[ORIENTATION, ORIENTATION] = turn.rotation @ covariance3 @ turn.rotation.T
     mask = list(update)
-    mask[ROLL:ROLL + 3] = _masked(turn, tuple(update[ROLL:ROLL + 3]))
+    mask[ROLL:ROLL + 3] = turn.masked(tuple(update[ROLL:ROLL + 3]))
     return _measurement(stamp_ns, z, covariance, _only(mask, ORIENTATION), threshold, source)
 
 
@@ -192,7 +227,8 @@ def acceleration(stamp_ns: int, linear: FloatArray, covariance3: FloatArray,
                  update: tuple[bool, ...], state_rates: FloatArray,
                  angular_acceleration: FloatArray, attitude: FloatArray | None,
                  remove_gravity: bool, gravity: float = GRAVITY, mount: Mount = IDENTITY,
-                 threshold: float = math.inf, source: str = "") -> Measurement | None:
+                 threshold: float = math.inf, source: str = "", compiled: bool = True
+                 ) -> Measurement | None:
     """A linear acceleration in the sensor's frame as a measurement in the robot's.
 
     ``attitude`` is the sensor frame's attitude in the world (a rotation matrix): the
@@ -200,16 +236,25 @@ def acceleration(stamp_ns: int, linear: FloatArray, covariance3: FloatArray,
     the IMU reports none.
     """
     r, o = mount.rotation, mount.origin
-    if remove_gravity and attitude is not None:
-        linear = linear - attitude.T @ np.array([0.0, 0.0, gravity])
-    a = r @ linear + _cross(o, angular_acceleration) \
-        - _cross(_cross(o, state_rates), state_rates)
-    z = np.zeros(STATE_SIZE)
-    z[ACCELERATION] = a
-    covariance = np.zeros((STATE_SIZE, STATE_SIZE))
-    covariance[ACCELERATION, ACCELERATION] = r @ covariance3 @ r.T
+    # Gravity (0, 0, g) in the world, seen in the sensor's frame; none kept when not asked.
+    seen_from = attitude if remove_gravity and attitude is not None else None
+    kernels = steps.kernels(compiled)
+    if kernels is not None:
+        z, covariance = kernels.acceleration_values(
+            *map(c_doubles, (r, o, linear, covariance3, state_rates, angular_acceleration,
+                             r if seen_from is None else seen_from)),
+            0.0 if seen_from is None else gravity)
+    else:
+        if seen_from is not None:
+            linear = linear - seen_from.T @ np.array([0.0, 0.0, gravity])
+        a = r @ linear + _cross(o, angular_acceleration) \
+            - _cross(_cross(o, state_rates), state_rates)
+        z = np.zeros(STATE_SIZE)
+        z[ACCELERATION] = a
+        covariance = np.zeros((STATE_SIZE, STATE_SIZE))
+        covariance[ACCELERATION, ACCELERATION] = r @ covariance3 @ r.T
     mask = list(update)
-    mask[AX:AX + 3] = _masked(r, tuple(update[AX:AX + 3]))
+    mask[AX:AX + 3] = mount.masked(tuple(update[AX:AX + 3]))
     return _measurement(stamp_ns, z, covariance, _only(mask, ACCELERATION), threshold, source)
 
 
@@ -221,17 +266,17 @@ def force_two_d(measurement: Measurement) -> Measurement:
     Their cross terms with the other entries are zeroed. The peer keeps the message's,
     which belong to the values replaced and can leave R indefinite.
     """
-    zeros = list(PLANAR_ZEROS)
     z = measurement.z.copy()
-    z[zeros] = 0.0
+    z[_PLANAR_INDEX] = 0.0
     covariance = measurement.covariance.copy()
-    covariance[zeros, :] = 0.0
-    covariance[:, zeros] = 0.0
-    covariance[zeros, zeros] = PLANAR_VARIANCE
-    indices = tuple(sorted(set(measurement.indices) | set(PLANAR_ZEROS)))
-    return dataclasses.replace(measurement, z=z, covariance=covariance, indices=indices)
+    covariance[_PLANAR_INDEX, :] = 0.0
+    covariance[:, _PLANAR_INDEX] = 0.0
+    covariance[_PLANAR_INDEX, _PLANAR_INDEX] = PLANAR_VARIANCE
+    indices = tuple(sorted(set(measurement.indices).union(PLANAR_ZEROS)))
+    return Measurement(measurement.stamp_ns, z, covariance, indices, measurement.threshold,
+                       measurement.source)
 
 
 def _only(mask: list[bool], part: slice) -> list[bool]:
     """The mask with every entry outside ``part`` off (a message feeds one part per call)."""
-    return [flag and part.start <= i < part.stop for i, flag in enumerate(mask)]
+    return [False] * part.start + mask[part] + [False] * (len(mask) - part.stop)

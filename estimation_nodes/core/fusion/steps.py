@@ -12,23 +12,47 @@ The EKF's covariance update is the Joseph form. The UKF is the scaled unscented
 transform with the peer's weights (lambda = alpha^2 (n + kappa) - n); its first
 correction after a prediction uses the propagated sigma points, later ones draw new
 ones from the corrected covariance. Functions return new values; inputs are left alone.
+
+Each step runs as compiled.py's kernel where numba imports (``compiled=True``, the
+default), else as its ``*_numpy`` twin here, the reference the kernels are tested equal
+to: numpy's calls on 15 x 15 arrays cost more than their arithmetic.
 """
 
 from __future__ import annotations
 
+import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimation_nodes.core.compiled_loader import load_kernels
 from estimation_nodes.core.fusion import motion
-from estimation_nodes.core.fusion.state import ANGLES, PITCH, ROLL, STATE_SIZE, YAW, \
-    wrap_state_angles
+from estimation_nodes.core.fusion.state import ANGLES, STATE_SIZE, wrap, wrap_state_angles
 from estimation_nodes.core.errors import InvalidInputError
-from estimation_nodes.core.validation import FloatArray, check_covariance
+from estimation_nodes.core.validation import MATRIX_TOLERANCE, FloatArray, check_covariance
 
 #: The smallest variance a measurement may claim (the peer's floor).
 MIN_VARIANCE = 1e-9
+COMPILED = "estimation_nodes.core.fusion.compiled"
+
+
+def prepare_compiled() -> bool:
+    """Compile (or load from numba's cache) the steps' kernels now, not at the first
+    message a node answers; False where numba does not import."""
+    return load_kernels(COMPILED) is not None
+
+
+def kernels(compiled: bool = True):
+    """compiled.py's module (compiled once), None where numba does not import or
+    ``compiled`` is False."""
+    return load_kernels(COMPILED) if compiled else None
+
+
+def c_doubles(array: FloatArray) -> FloatArray:
+    """The array as the kernels were compiled for (C-ordered doubles): no copy when it is
+    (another layout would compile them anew)."""
+    return np.ascontiguousarray(array, dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -47,6 +71,13 @@ class Measurement:
     threshold: float = math.inf
     #: Where it came from ("odom0_twist", ...), for diagnostics.
     source: str = ""
+
+    #: ``indices`` as the kernels take them (made once: the check and the correction both
+    #: read them).
+    index_array: np.ndarray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "index_array", np.array(self.indices, dtype=np.int64))
 
 
 class Rejected(Exception):
@@ -68,11 +99,21 @@ def subset(measurement: Measurement) -> tuple[FloatArray, FloatArray]:
     return z, r
 
 
-def covariance_problem(measurement: Measurement) -> str | None:
+def covariance_problem(measurement: Measurement, compiled: bool = True) -> str | None:
     """Why the measurement's R (on its entries, its variances as ``subset`` floors them)
     cannot be used, None when it can: a non-finite entry, or a matrix that is not symmetric
     positive semi-definite (the peer takes it as it is: an indefinite R can turn the
-    innovation's covariance indefinite and the state's with it)."""
+    innovation's covariance indefinite and the state's with it). The kernel proves the
+    common case usable; what it cannot prove, numpy's eigenvalues decide."""
+    compiled_steps = kernels(compiled)
+    if compiled_steps is not None:
+        verdict = compiled_steps.covariance_verdict(c_doubles(measurement.covariance),
+                                             measurement.index_array, MIN_VARIANCE,
+                                             MATRIX_TOLERANCE)
+        if verdict == 0:
+            return None
+        if verdict == 1:
+            return "a non-finite covariance"
     _, r = subset(measurement)
     if not np.all(np.isfinite(r)):
         return "a non-finite covariance"
@@ -92,22 +133,47 @@ def _wrap_angle_entries(vector: FloatArray, indices: tuple[int, ...]) -> FloatAr
 
 
 def _check(innovation: np.ndarray, s_inverse: np.ndarray, threshold: float) -> None:
-    squared = float(innovation @ s_inverse @ innovation)
+    _reject_beyond(float(innovation @ s_inverse @ innovation), threshold)
+
+
+def _reject_beyond(squared: float, threshold: float) -> None:
     if squared >= threshold * threshold:
         raise Rejected(squared, threshold)
 
 
-def ekf_predict(x: FloatArray, p: FloatArray, q: FloatArray, dt: float
-                ) -> tuple[FloatArray, FloatArray]:
+def ekf_predict(x: FloatArray, p: FloatArray, q: FloatArray, dt: float,
+                compiled: bool = True) -> tuple[FloatArray, FloatArray]:
     """x' = F(x) x, P' = J P J' + dt Q."""
+    compiled_steps = kernels(compiled)
+    if compiled_steps is not None:
+        return compiled_steps.ekf_predict(c_doubles(x), c_doubles(p), c_doubles(q), float(dt))
+    return ekf_predict_numpy(x, p, q, dt)
+
+
+def ekf_predict_numpy(x: FloatArray, p: FloatArray, q: FloatArray, dt: float
+                      ) -> tuple[FloatArray, FloatArray]:
+    """``ekf_predict`` over numpy arrays."""
     f = motion.transfer(x, dt)
     j = motion.jacobian(x, dt)
     return wrap_state_angles(f @ x), j @ p @ j.T + dt * q
 
 
-def ekf_correct(x: FloatArray, p: FloatArray, measurement: Measurement
-                ) -> tuple[FloatArray, FloatArray]:
+def ekf_correct(x: FloatArray, p: FloatArray, measurement: Measurement,
+                compiled: bool = True) -> tuple[FloatArray, FloatArray]:
     """K = P H' (H P H' + R)^-1, x' = x + K y, P' = (I - K H) P (I - K H)' + K R K'."""
+    compiled_steps = kernels(compiled)
+    if compiled_steps is not None:
+        squared, x_new, p_new = compiled_steps.ekf_correct(
+            c_doubles(x), c_doubles(p), c_doubles(measurement.z),
+            c_doubles(measurement.covariance), measurement.index_array, MIN_VARIANCE)
+        _reject_beyond(squared, measurement.threshold)
+        return x_new, p_new
+    return ekf_correct_numpy(x, p, measurement)
+
+
+def ekf_correct_numpy(x: FloatArray, p: FloatArray, measurement: Measurement
+                      ) -> tuple[FloatArray, FloatArray]:
+    """``ekf_correct`` over numpy arrays."""
     idx = list(measurement.indices)
     z, r = subset(measurement)
     pht = p[:, idx]                       # P H' with H the rows idx of the identity
@@ -129,20 +195,24 @@ class UnscentedWeights:
     kappa: float = 0.0
     beta: float = 2.0
 
-    @property
+    @functools.cached_property
     def lam(self) -> float:
         return self.alpha * self.alpha * (STATE_SIZE + self.kappa) - STATE_SIZE
 
-    @property
+    @functools.cached_property
     def mean(self) -> FloatArray:
+        """The mean's weights (read-only: computed once, shared by every step)."""
         w = np.full(2 * STATE_SIZE + 1, 1.0 / (2.0 * (STATE_SIZE + self.lam)))
         w[0] = self.lam / (STATE_SIZE + self.lam)
+        w.flags.writeable = False
         return w
 
-    @property
+    @functools.cached_property
     def covariance(self) -> FloatArray:
+        """The covariance's weights (read-only, as ``mean``)."""
         w = self.mean.copy()
         w[0] += 1.0 - self.alpha * self.alpha + self.beta
+        w.flags.writeable = False
         return w
 
 
@@ -159,38 +229,85 @@ def sigma_points(x: FloatArray, p: FloatArray, weights: UnscentedWeights) -> Flo
     return np.vstack([x, x + root.T, x - root.T])
 
 
-def _circular_mean(values: FloatArray, weights: FloatArray) -> float:
-    return math.atan2(float(weights @ np.sin(values)), float(weights @ np.cos(values)))
+def unscented_mean(points: FloatArray, w_mean: FloatArray, angle_columns: list[int]
+                   ) -> FloatArray:
+    """sum_i w_i X_i over the points' rows, the columns ``angle_columns`` as circular means.
+
+    Computed as X_0 + sum_{i>0} w_i (X_i - X_0), and an angle as X_0 + atan2(sum_{i>0} w_i
+    sin d_i, 1 - 2 sum_{i>0} w_i sin^2(d_i / 2)) with d_i = X_i - X_0: the same in exact
+    arithmetic, the weights summing to 1. With the peer's alpha of 0.001, w_0 = lambda /
+    (n + lambda) is about -1e6, and the direct sum keeps the rounding of terms a million
+    times the state's size; the differences here are small and keep none of it.
+    """
+    first = points[0]
+    offsets = points[1:] - first
+    w = w_mean[1:]
+    mean = first + w @ offsets
+    for column in angle_columns:
+        d = offsets[:, column]
+        mean[column] = wrap(float(first[column]) + math.atan2(
+            float(w @ np.sin(d)), 1.0 - 2.0 * float(w @ np.sin(0.5 * d) ** 2)))
+    return mean
 
 
 def ukf_predict(x: FloatArray, p: FloatArray, q: FloatArray, dt: float,
-                weights: UnscentedWeights) -> tuple[FloatArray, FloatArray, FloatArray]:
+                weights: UnscentedWeights, compiled: bool = True
+                ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Propagate the sigma points; (x', P', the propagated points)."""
+    compiled_steps = kernels(compiled)
+    if compiled_steps is not None:
+        drawn, x_new, p_new, points = compiled_steps.ukf_predict(
+            c_doubles(x), c_doubles(p), c_doubles(q), float(dt), STATE_SIZE + weights.lam,
+            weights.mean, weights.covariance)
+        if drawn:
+            return x_new, p_new, points
+    return ukf_predict_numpy(x, p, q, dt, weights)
+
+
+def ukf_predict_numpy(x: FloatArray, p: FloatArray, q: FloatArray, dt: float,
+                      weights: UnscentedWeights) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """``ukf_predict`` over numpy arrays (and the symmetric root where P has no Cholesky
+    factor)."""
     points = np.array([motion.transfer(point, dt) @ point
                        for point in sigma_points(x, p, weights)])
-    w_mean, w_cov = weights.mean, weights.covariance
-    mean = w_mean @ points
-    for index in (ROLL, PITCH, YAW):
-        mean[index] = _circular_mean(points[:, index], w_mean)
+    w_cov = weights.covariance
+    mean = unscented_mean(points, weights.mean, list(ANGLES))
     diff = _wrap_angle_entries(points - mean, tuple(range(STATE_SIZE)))
     p_new = (diff * w_cov[:, None]).T @ diff + dt * q
     return wrap_state_angles(mean), p_new, points
 
 
 def ukf_correct(x: FloatArray, p: FloatArray, measurement: Measurement,
-                weights: UnscentedWeights, points: FloatArray | None
+                weights: UnscentedWeights, points: FloatArray | None, compiled: bool = True
                 ) -> tuple[FloatArray, FloatArray]:
     """Correct with ``points`` (the propagated ones), or new ones from (x, P) when None."""
+    compiled_steps = kernels(compiled)
+    if compiled_steps is None:
+        return ukf_correct_numpy(x, p, measurement, weights, points)
+    x, p = c_doubles(x), c_doubles(p)
+    if points is None:
+        drawn, points = compiled_steps.sigma_points(x, p, STATE_SIZE + weights.lam)
+        if not drawn:
+            points = sigma_points(x, p, weights)
+    squared, x_new, p_new = compiled_steps.ukf_correct(
+        x, p, c_doubles(points), c_doubles(measurement.z), c_doubles(measurement.covariance),
+        measurement.index_array, MIN_VARIANCE, weights.mean, weights.covariance)
+    _reject_beyond(squared, measurement.threshold)
+    return x_new, p_new
+
+
+def ukf_correct_numpy(x: FloatArray, p: FloatArray, measurement: Measurement,
+                      weights: UnscentedWeights, points: FloatArray | None
+                      ) -> tuple[FloatArray, FloatArray]:
+    """``ukf_correct`` over numpy arrays."""
     if points is None:
         points = sigma_points(x, p, weights)
     idx = list(measurement.indices)
     z, r = subset(measurement)
-    w_mean, w_cov = weights.mean, weights.covariance
+    w_cov = weights.covariance
     predicted_points = points[:, idx]
-    predicted = w_mean @ predicted_points
-    for row, index in enumerate(measurement.indices):
-        if index in ANGLES:
-            predicted[row] = _circular_mean(predicted_points[:, row], w_mean)
+    predicted = unscented_mean(predicted_points, weights.mean, [
+        row for row, index in enumerate(measurement.indices) if index in ANGLES])
     z_diff = _wrap_angle_entries(predicted_points - predicted, measurement.indices)
     x_diff = _wrap_angle_entries(points - x, tuple(range(STATE_SIZE)))
     s = (z_diff * w_cov[:, None]).T @ z_diff

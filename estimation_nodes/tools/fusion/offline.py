@@ -33,16 +33,20 @@ class FusionRun:
     inputs: SensorInputs
     #: (stamp ns, the 15-entry state) of each periodic output.
     outputs: list[tuple[int, np.ndarray]]
+    #: The 15 x 15 covariance of each periodic output, when the run was asked to keep them.
+    covariances: list[np.ndarray]
 
 
 def bag_messages(path: Path, topics: set[str]):
     """(receive time ns, topic, message) in recorded order, from any bag ``rosbags`` reads
-    (the one bag reader: tools/recording/bags.py)."""
-    for timestamp, topic, _, msg in bags.bag_messages(path, topics):
+    (the one bag reader: tools/recording/bags.py), as ``rosbags`` decoded them: the inputs
+    read fields by name, as of an rclpy message."""
+    for timestamp, topic, _, msg in bags.bag_messages(path, topics, as_rclpy=False):
         yield timestamp, topic, msg
 
 
-def run(config: FusionConfig, messages, mounts: dict[str, Mount] | None = None) -> FusionRun:
+def run(config: FusionConfig, messages, mounts: dict[str, Mount] | None = None,
+        keep_covariances: bool = False) -> FusionRun:
     """The node's loop over recorded messages: callbacks between periodic updates."""
     fusion = FusionFilter(config.settings)
     sensor_inputs = config.sensor_inputs(mounts)
@@ -52,12 +56,15 @@ def run(config: FusionConfig, messages, mounts: dict[str, Mount] | None = None) 
     period_ns = round(1e9 / config.frequency)
     next_tick: int | None = None
     outputs: list[tuple[int, np.ndarray]] = []
+    covariances: list[np.ndarray] = []
 
     def tick(now_ns: int) -> None:
         fusion.update(now_ns)
         fusion.differentiate(now_ns)
         if fusion.initialized:
             outputs.append((fusion.last_time_ns, fusion.x.copy()))
+            if keep_covariances:
+                covariances.append(fusion.p.copy())
 
     for received_ns, topic, msg in messages:
         if next_tick is None:
@@ -69,7 +76,7 @@ def run(config: FusionConfig, messages, mounts: dict[str, Mount] | None = None) 
             sensor_inputs.add(sensor, msg, fusion)
     if next_tick is not None:
         tick(next_tick)
-    return FusionRun(fusion, sensor_inputs, outputs)
+    return FusionRun(fusion, sensor_inputs, outputs, covariances)
 
 
 def parse_mount(text: str) -> tuple[str, Mount]:

@@ -64,9 +64,14 @@ def _with_msg(element: str) -> str:
     return f"{package}/msg/{name}"
 
 
-def bag_messages(path: Path, topics: set[str] | None = None
+def bag_messages(path: Path, topics: set[str] | None = None, as_rclpy: bool = True
                  ) -> Iterator[tuple[int, str, str, Any]]:
-    """(receive time ns, topic, ROS 2 type name, rclpy message) in recorded order."""
+    """(receive time ns, topic, ROS 2 type name, rclpy message) in recorded order.
+
+    With ``as_rclpy`` False, each message as ``rosbags`` decoded it: the same field names
+    and values (and a ROS 1 message's extra fields), for a reader that reads fields by
+    name and never publishes, which then skips the copy into rclpy's classes, the most
+    costly part of reading (estimation_fuse)."""
     try:
         from rosbags.highlevel import AnyReader
     except ImportError:
@@ -76,11 +81,13 @@ def bag_messages(path: Path, topics: set[str] | None = None
         with AnyReader([path]) as reader:
             connections = [c for c in reader.connections
                            if topics is None or c.topic in topics]
-            classes = {c.msgtype: rclpy_class(c.msgtype) for c in connections}
+            classes = {c.msgtype: rclpy_class(c.msgtype) for c in connections} \
+                if as_rclpy else {}
             for connection, timestamp, raw in reader.messages(connections=connections):
                 decoded = reader.deserialize(raw, connection.msgtype)
                 yield (timestamp, connection.topic, connection.msgtype,
-                       to_rclpy(decoded, classes[connection.msgtype]))
+                       to_rclpy(decoded, classes[connection.msgtype]) if as_rclpy
+                       else decoded)
     except RecordingError:
         raise
     except Exception as error:  # rosbags' own errors: a file that is not a bag it reads
