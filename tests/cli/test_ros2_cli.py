@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import re
+import subprocess
 import threading
 import time
 
@@ -381,15 +382,24 @@ def test_grid_localizer_waits_for_ros2_lifecycle_then_answers_amcls_services(ros
     (tmp_path / "corridor.yaml").write_text(yaml.safe_dump(document))
     start_nodes(ros2, ros2_start, "grid_localizer",
                 args=("--ros-args", "--params-file", str(tmp_path / "corridor.yaml")))
-    state = ros2("lifecycle", "get", "--no-daemon", "--spin-time", "3", "/grid_localizer")
-    assert state.returncode == 0 and "unconfigured" in state.stdout, state.stdout
+    assert "unconfigured" in lifecycle(ros2, "get").stdout
     for transition in ("configure", "activate"):
-        changed = ros2("lifecycle", "set", "--no-daemon", "--spin-time", "3",
-                       "/grid_localizer", transition, timeout=120)
-        assert changed.returncode == 0 and "Transitioning successful" in changed.stdout, \
-            changed.stdout
-    state = ros2("lifecycle", "get", "--no-daemon", "--spin-time", "3", "/grid_localizer")
+        changed = lifecycle(ros2, "set", transition)
+        assert "Transitioning successful" in changed.stdout, changed.stdout
+    state = lifecycle(ros2, "get")
     assert "active" in state.stdout and "inactive" not in state.stdout, state.stdout
     called = ros2("service", "call", "/reinitialize_global_localization",
                   "std_srvs/srv/Empty")
     assert called.returncode == 0 and "response" in called.stdout, called.stdout
+
+
+def lifecycle(ros2, verb: str, *args: str, attempts: int = 5) -> subprocess.CompletedProcess:
+    """`ros2 lifecycle VERB /grid_localizer ...`, asked again while the CLI has not discovered
+    the node yet ("Node not found": discovery of a fresh participant takes seconds here)."""
+    for _ in range(attempts):
+        done = ros2("lifecycle", verb, "--no-daemon", "--spin-time", "3", "/grid_localizer",
+                    *args, timeout=120)
+        if "Node not found" not in done.stdout:
+            break
+    assert done.returncode == 0, done.stdout
+    return done

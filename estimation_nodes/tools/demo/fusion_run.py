@@ -74,8 +74,12 @@ def run(params: Path, args: argparse.Namespace) -> int:
               f"bag: a file in msgs_config/bags/ or a path)", file=sys.stderr)
         return 2
     rate = float(demo.get("rate", 1.0))
-    play = (sys.executable, "-m", "estimation_nodes.tools.recording.play", str(bag),
-            "--clock", "--rate", f"{rate:g}", "--wait-for-subscribers", "30", "--delay", "1")
+    # Through tools/start.py, as the console script: it takes the Ctrl-C that run_graph's
+    # start leaves blocked until the program can end quietly on it.
+    play = (sys.executable, "-c",
+            "from estimation_nodes.tools.start import estimation_play; estimation_play()",
+            str(bag), "--clock", "--rate", f"{rate:g}", "--wait-for-subscribers", "30",
+            "--delay", "1")
     print(f"estimation_demo: ekf_node on {bag.name}, played with --clock at {rate:g}x")
     # rclpy is imported by run_graph under its Ctrl-C hold: the monitor's class with it.
     code, monitor = run_graph(params, lambda: _monitor_class()(args.quiet), [
