@@ -333,6 +333,8 @@ def kidnap_trials(log: carmen.CarmenLog, count: int, rng: np.random.Generator) -
     trials: list[Trial] = []
     while len(trials) < count:
         k = int(rng.integers(10, last))
+        if any(trial.k == k for trial in trials):
+            continue        # a trial of its own each: the same k would repeat one
         distance = np.hypot(*(poses - poses[k]).T)
         candidates = np.flatnonzero((distance >= KIDNAP_M[0]) & (distance <= KIDNAP_M[1])
                                     & (np.abs(times - times[k]) >= KIDNAP_APART_S))
