@@ -422,8 +422,9 @@ def main() -> None:
                 updates = runner.run(runner.events, trials)
                 rows.append(row(name, "none", updates) + ["-", "-"])
                 rows.append(kidnap_row(name, trials))
-                listed += details(name, "none", updates) + details(
-                    name, "kidnap", [u for t in trials for u in t.updates])
+                listed += details(name, "none", updates)
+                for trial in trials:     # each trial's evidence against its own updates
+                    listed += details(name, f"kidnap {trial.k} -> {trial.m}", trial.updates)
             else:
                 if fault == "none":
                     events = runner.events
