@@ -79,16 +79,17 @@ def building_map(log: carmen.CarmenLog):
     return mapper.occupancy()
 
 
-def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
-        belief_floor: float, profile: bool, global_start: bool = False,
-        scan_fit: bool = True) -> dict:
-    """The localizer on the log's first ``scans`` scans, from the first corrected pose
-    (or, ``global_start``, from no pose: uniform over the free cells)."""
-    log = carmen.read_log(log_path)
+def localizer(log: carmen.CarmenLog, resolution: float, heading_bins: int,
+              belief_floor: float, global_start: bool = False, scan_fit: bool = True,
+              **overrides):
+    """The localizer with grid_localizer's defaults (and ``overrides``) on the map of
+    ``log``, from its first corrected pose (or, ``global_start``, from no pose: uniform
+    over the free cells), its kernels compiled; and its settings."""
     occupancy = building_map(log)
     values = spec_defaults(GRID_LOCALIZER_SPECS)
     values.update(resolution=resolution, heading_bins=heading_bins, max_states=200_000_000,
-                  laser_max_range=RANGE_MAX, belief_floor=belief_floor, scan_fit=scan_fit)
+                  laser_max_range=RANGE_MAX, belief_floor=belief_floor, scan_fit=scan_fit,
+                  **overrides)
     settings = build_grid_localizer_settings(values)
     model = grid_model(occupancy, resolution, heading_bins, settings.sensor,
                        settings.max_states, settings.scan_fit)
@@ -97,26 +98,43 @@ def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
         localization.set_prior(log.scans[0].pose,
                                np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2]))
     grid.compiled_kernels(grid.COMPILED_MIN_STATES)
+    return localization, settings
+
+
+def scan_beams(ranges: np.ndarray, max_beams: int) -> tuple[np.ndarray, np.ndarray]:
+    """The beams of a log's scan the localizer is given: ``max_beams`` evenly chosen among
+    those with a return (as grid_localizer chooses them), and their angles."""
+    valid = np.flatnonzero(ranges < RANGE_MAX)
+    if valid.size > max_beams:
+        valid = valid[np.linspace(0, valid.size - 1, max_beams).round().astype(int)]
+    return ranges[valid], beam_angles(ranges.size)[valid]
+
+
+def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
+        belief_floor: float, profile: bool, global_start: bool = False,
+        scan_fit: bool = True) -> dict:
+    """The localizer on the log's first ``scans`` scans, from the first corrected pose
+    (or, ``global_start``, from no pose: uniform over the free cells)."""
+    log = carmen.read_log(log_path)
+    localization, settings = localizer(log, resolution, heading_bins, belief_floor,
+                                       global_start, scan_fit)
+    model = localization.model
     odometry = iter(log.odometry)
     pending = next(odometry, None)
     times, errors, headings, stamps, qualities = [], [], [], [], []
     profiler = _profiler(profile)
     for scan in log.scans[:scans]:
-        stamp = _ns(scan.t)
-        while pending is not None and _ns(pending.t) <= stamp:
-            localization.on_odometry(pending.pose, _ns(pending.t))
+        stamp = ns(scan.t)
+        while pending is not None and ns(pending.t) <= stamp:
+            localization.on_odometry(pending.pose, ns(pending.t))
             pending = next(odometry, None)
         if not localization.due(stamp):
             continue
-        ranges = scan.ranges
-        valid = np.flatnonzero(ranges < RANGE_MAX)
-        if valid.size > settings.max_beams:
-            valid = valid[np.linspace(0, valid.size - 1, settings.max_beams).round().astype(int)]
-        angles = beam_angles(ranges.size)
+        ranges, angles = scan_beams(scan.ranges, settings.max_beams)
         started = time.perf_counter()
         if profiler:
             profiler.enable()
-        localization.update(ranges[valid], angles[valid], stamp)
+        localization.update(ranges, angles, stamp)
         if profiler:
             profiler.disable()
         times.append(time.perf_counter() - started)
@@ -153,7 +171,7 @@ def run_amcl(log_path: Path, stamps_ns: list[int], global_start: bool = False) -
     odometry, index = log.odometry, 0
     times, errors, headings = [], [], []
     for scan in log.scans:
-        if _ns(scan.t) not in taken:
+        if ns(scan.t) not in taken:
             continue
         while index + 1 < len(odometry) and odometry[index + 1].t <= scan.t:
             index += 1
@@ -177,7 +195,8 @@ def _scores(times: list[float], errors: list[float], headings: list[float]) -> d
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-def _ns(t: float) -> int:
+def ns(t: float) -> int:
+    """A log's time (s) as a stamp (ns)."""
     return int(round(t * 1e9))
 
 
@@ -195,6 +214,17 @@ def _print_profile(profiler) -> None:
 
 def resolve(name: str) -> Path:
     return LOGS.get(name, Path(name))
+
+
+def chosen_logs(names: list[str], script: str) -> list[str]:
+    """The logs a script was given (default: intel and aces); it exits, saying where it
+    looked, when one is not there."""
+    logs = names or ["intel", "aces"]
+    missing = [name for name in logs if not resolve(name).exists()]
+    if missing:
+        sys.exit(f"{script}: no log at {', '.join(str(resolve(n)) for n in missing)} "
+                 f"(see ../shared/data/README.md)")
+    return logs
 
 
 def main() -> None:
@@ -218,11 +248,7 @@ def main() -> None:
     if args.one:
         print(json.dumps(run_one(args)))
         return
-    logs = args.log or ["intel", "aces"]
-    missing = [name for name in logs if not resolve(name).exists()]
-    if missing:
-        sys.exit(f"real_buildings: no log at {', '.join(str(resolve(n)) for n in missing)} "
-                 f"(see ../shared/data/README.md)")
+    logs = chosen_logs(args.log, "real_buildings")
     floors = args.belief_floor or [0.0, spec_defaults(GRID_LOCALIZER_SPECS)["belief_floor"]]
     with_amcl = not args.no_amcl and amcl_baseline.available()
     if not args.no_amcl and not with_amcl:

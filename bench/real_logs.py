@@ -34,7 +34,7 @@ sys.path.insert(0, str(BENCH))
 sys.path.insert(1, str(BENCH.parent))
 
 import amcl_baseline  # noqa: E402
-from real_buildings import amcl_child, grid_child, resolve  # noqa: E402
+from real_buildings import amcl_child, chosen_logs, grid_child  # noqa: E402
 from timing import table  # noqa: E402
 
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults  # noqa: E402
@@ -93,11 +93,7 @@ def main() -> None:
     parser.add_argument("--no-scan-fit", action="store_true",
                         help="scan_fit false: the pose is the belief's, not refined by the scan")
     args = parser.parse_args()
-    logs = args.log or ["intel", "aces"]
-    missing = [name for name in logs if not resolve(name).exists()]
-    if missing:
-        sys.exit(f"real_logs: no log at {', '.join(str(resolve(n)) for n in missing)} "
-                 f"(see ../shared/data/README.md)")
+    logs = chosen_logs(args.log, "real_logs")
     if not amcl_baseline.available():
         print("real_logs: no AMCL baseline: pip install amcl==0.1.2 (the bench extra)",
               file=sys.stderr)

@@ -541,6 +541,7 @@ class GridLocalizer(ManagedNode):
                 "updates": self.localization.updates,
                 "window_states": self.localization.window_states,
                 "last_dropped_probability": f"{self.localization.last_dropped:.3g}",
+                "lost_probability": f"{self.localization.lost_probability:.3g}",
             })
             if math.isfinite(self.localization.log_evidence):
                 values["last_log_evidence"] = f"{self.localization.log_evidence:.4f}"

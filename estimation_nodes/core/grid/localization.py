@@ -26,6 +26,12 @@ kidnap share then goes on a coarse lattice of one state in eight, half of it at
 each update in turn (``window.correct_boxes``, ``window.lattice_cells``), scored
 with the scan. 0 keeps the dense filter.
 
+What ``estimate`` publishes carries a doubt on the most likely place (grid/failure.py):
+the kidnap share's posterior probability at each update, all of it when the most
+likely state jumped beyond the prediction's reach, halved by each update that does not
+renew it, plus what belief_floor dropped (``lost_probability``): the quality is that
+much lower, the covariance that much the robot's anywhere on the free cells.
+
 Each method checks what it is given (a pose of three finite numbers, a scan of
 readings as ``steps.check_scan`` says, a stamp that is an integer) and raises
 ``InvalidInputError`` naming it; the belief it holds is its own, so the steps
@@ -44,7 +50,7 @@ from enum import Enum
 import numpy as np
 
 from estimation_nodes.core.errors import InvalidInputError
-from estimation_nodes.core.grid import scan_fit
+from estimation_nodes.core.grid import failure, scan_fit
 from estimation_nodes.core.grid import steps as grid
 from estimation_nodes.core.grid import window
 from estimation_nodes.core.validation import (
@@ -63,7 +69,8 @@ ODOMETRY_HISTORY = 200
 class Estimate:
     """What the localizer publishes: the most likely pose (the belief's mean over the
     most likely state and its neighbours: finer than the grid), the belief's covariance
-    around it, and the probability near it."""
+    around it, and the probability near it, both with the doubt on that place
+    (``GridLocalization.lost_probability``)."""
 
     pose: Pose
     covariance: FloatArray
@@ -126,6 +133,12 @@ class GridLocalization:
         self.log_evidence = float("nan")
         #: The probability belief_floor dropped at the last update.
         self.last_dropped = 0.0
+        #: The doubt that the most likely place holds the robot (grid/failure.py), the
+        #: place it is about (the last update's most likely pose), and where the robot is
+        #: if it is not there: anywhere on the free cells.
+        self.doubt = 0.0
+        self._mode: Pose | None = None
+        self._anywhere = failure.spread_of(model)
         #: The odometry pose at the last update (None: no update yet) and the latest one.
         self._reference: Pose | None = None
         self._latest: Pose | None = None
@@ -140,12 +153,19 @@ class GridLocalization:
         """Not knowing where the robot is: uniform over the free cells."""
         self._hold(grid.uniform_over_free(self.model))
         self.log_evidence = float("nan")
+        self._forget_doubt()
 
     def set_prior(self, pose: Pose, covariance: FloatArray) -> None:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
         x, y, yaw = grid.check_pose("pose", pose)
         prior = grid.gaussian_prior(self.model, x, y, yaw, covariance)
         self._hold(prior)
+        self._forget_doubt()
+
+    def _forget_doubt(self) -> None:
+        """A prior given (or none: uniform) is the belief's whole answer: no new mode in
+        it, and none to compare the next update's with."""
+        self.doubt, self._mode = 0.0, None
 
     def _hold(self, belief: FloatArray) -> None:
         """Take ``belief`` over the whole grid as the belief: with belief_floor > 0 without
@@ -265,29 +285,53 @@ class GridLocalization:
         if self._floor > 0.0:
             correction = self._windowed_step(ranges, angles, delta, weight)
             self._hold_windows(correction)
-            log_evidence = correction.log_evidence
+            log_evidence, kidnapped = correction.log_evidence, correction.kidnapped
         else:
-            posterior, log_evidence = self._dense_step(ranges, angles, delta, weight)
+            posterior, log_evidence, kidnapped = self._dense_step(ranges, angles, delta,
+                                                                  weight)
             self._hold(posterior)
         self.log_evidence = log_evidence
+        mode = self._most_likely_pose()
+        jumped = delta is not None and self._mode is not None and failure.jumped(
+            self.model, self.noise, self._mode, delta, mode)
+        self.doubt = failure.judged(self.doubt, kidnapped, jumped)
+        self._mode = mode
         self._reference = pose
         self._last_scan = (ranges, angles)
         self.updates += 1
 
     def _dense_step(self, ranges: FloatArray, angles: FloatArray,
                     delta: tuple[float, float, float] | None,
-                    weight: float) -> tuple[FloatArray, float]:
-        """The exact filter over the whole grid: posterior and log evidence."""
+                    weight: float) -> tuple[FloatArray, float, float]:
+        """The exact filter over the whole grid: posterior, log evidence and the kidnap
+        share's posterior probability."""
         belief = self.belief
         if delta is not None:
             belief = grid._predict(belief, self.model, delta, self.noise)
-        if self._kidnap > 0.0:
-            # The robot may have been carried anywhere: a little of the belief everywhere,
-            # so a kidnapped robot is found again by the scans alone.
-            belief = (1.0 - self._kidnap) * belief + \
-                (self._kidnap / self._free_states) * self.model.free
-        return grid._correct_scan(belief, self.model, ranges, angles, weight=weight,
-                                  box=window.full_box(self.model))
+        if self._kidnap <= 0.0:
+            posterior, log_evidence = grid._correct_scan(
+                belief, self.model, ranges, angles, weight=weight,
+                box=window.full_box(self.model))
+            return posterior, log_evidence, 0.0
+        # The robot may have been carried anywhere: a little of the belief everywhere,
+        # so a kidnapped robot is found again by the scans alone.
+        belief = (1.0 - self._kidnap) * belief + \
+            (self._kidnap / self._free_states) * self.model.free
+
+        def log_likelihood() -> FloatArray:
+            total = grid._scan_log_likelihood(self.model, ranges, angles, True,
+                                              window.full_box(self.model))
+            return np.multiply(total, weight, out=total) if weight != 1.0 else total
+
+        scores = log_likelihood()
+        free = np.broadcast_to(self.model.free, scores.shape)
+        peak = float(np.max(scores, where=free, initial=-math.inf))
+        # log of the kidnap share's part of the evidence: (kidnap / free states) x the sum
+        # of the likelihood over the free states.
+        share = math.log(self._kidnap / self._free_states) + peak + math.log(
+            float(np.sum(np.exp(scores - peak), where=free)))
+        posterior, log_evidence = grid._correct_in(scores, belief, log_likelihood)
+        return posterior, log_evidence, min(1.0, math.exp(share - log_evidence))
 
     def _windowed_step(self, ranges: FloatArray, angles: FloatArray,
                        delta: tuple[float, float, float] | None,
@@ -325,20 +369,41 @@ class GridLocalization:
     def estimate(self, radius: float, angle: float) -> Estimate:
         """The most likely pose (steps.refined_pose of the most likely state), the
         covariance around it, and the probability within ``radius`` (m) and ``angle``
-        (rad) of it: sums over the windows."""
+        (rad) of it: sums over the windows; both for a belief that may have lost the
+        robot (``lost_probability``): the quality that much lower, the covariance the
+        mixture's with the robot anywhere."""
         radius, angle = check_non_negative("radius", radius), check_non_negative("angle", angle)
         model = self.model
         windows = [(box, window.window_of(self.belief, box)) for box in self._boxes]
         box, belief = max(windows, key=lambda pair: float(pair[1].max()))
         pose = grid._refined_pose(belief, model, grid._most_likely_state(belief), box)
         estimate = self._around(windows, box, belief, pose, radius, angle)
-        if model.scan_fit is None or self._last_scan is None:
+        if model.scan_fit is not None and self._last_scan is not None:
+            # The belief's figures stay those of its own pose; the published pose is the
+            # scan's best fit within a state cell and a heading bin of it.
+            fitted = scan_fit.fitted_pose(model.scan_fit, pose, *self._last_scan,
+                                          model.resolution, model.bin_width)
+            estimate = Estimate(fitted, estimate.covariance, estimate.quality)
+        doubt = self.lost_probability
+        if doubt == 0.0:
             return estimate
-        # The belief's figures stay those of its own pose; the published pose is the
-        # scan's best fit within a state cell and a heading bin of it.
-        fitted = scan_fit.fitted_pose(model.scan_fit, pose, *self._last_scan,
-                                      model.resolution, model.bin_width)
-        return Estimate(fitted, estimate.covariance, estimate.quality)
+        return Estimate(estimate.pose,
+                        (1.0 - doubt) * estimate.covariance
+                        + doubt * failure.anywhere_around(self._anywhere, estimate.pose),
+                        (1.0 - doubt) * estimate.quality)
+
+    def _most_likely_pose(self) -> Pose:
+        """The belief's mean around its most likely state (the pose ``estimate`` refines)."""
+        windows = [(box, self.belief[:, box[0]:box[1], box[2]:box[3]]) for box in self._boxes]
+        box, belief = max(windows, key=lambda pair: float(pair[1].max()))
+        return grid._refined_pose(belief, self.model, grid._most_likely_state(belief), box)
+
+    @property
+    def lost_probability(self) -> float:
+        """The probability that the most likely place does not hold the robot: the doubt
+        on it (grid/failure.py), or that the robot was in what belief_floor dropped at the
+        last update."""
+        return 1.0 - (1.0 - self.doubt) * (1.0 - self.last_dropped)
 
     def _around(self, windows: list, box: window.Box, belief: FloatArray, pose: Pose,
                 radius: float, angle: float) -> Estimate:

@@ -247,13 +247,13 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridMo
     if lattice_ll is None:
         return Correction(parts, boxes, _no_states(), log_evidence, 0.0)
     lattice /= total
-    kept, left_out = _lattice_into(parts, boxes, lattice, floor)
+    kept, left_out, kidnapped = _lattice_into(parts, boxes, lattice, floor)
     if left_out > 0.0:
         remaining = sum(float(part.sum()) for part in parts) + float(kept[3].sum())
         for part in parts:
             part /= remaining
         kept = (kept[0], kept[1], kept[2], kept[3] / remaining)
-    return Correction(parts, boxes, kept, log_evidence, left_out)
+    return Correction(parts, boxes, kept, log_evidence, left_out, kidnapped)
 
 
 @dataclass
@@ -267,6 +267,9 @@ class Correction:
     log_evidence: float
     #: The probability of the lattice states left out (each below the floor).
     left_out: float
+    #: The posterior probability of the kidnap share (0 without one): that the scan was
+    #: explained by a place the robot was carried to, not by the tracked belief.
+    kidnapped: float = 0.0
 
 
 def _no_states() -> States:
@@ -275,10 +278,10 @@ def _no_states() -> States:
 
 
 def _lattice_into(parts: list[FloatArray], boxes: list[Box], lattice: FloatArray,
-                  floor: float) -> tuple[States, float]:
+                  floor: float) -> tuple[States, float, float]:
     """Add the lattice's posterior within each box to that box's part; of the rest, the
     states of ``floor`` or more (headings, rows, columns, probabilities) and the
-    probability of those left out."""
+    probability of those left out; and the lattice's whole posterior probability."""
     step = KIDNAP_STEP
     covered = np.zeros(lattice.shape[1:], dtype=bool)
     inside = 0.0
@@ -296,5 +299,6 @@ def _lattice_into(parts: list[FloatArray], boxes: list[Box], lattice: FloatArray
     chosen &= ~covered[None]
     k, i, j = np.nonzero(chosen)
     values = lattice[k, i, j]
-    left_out = max(float(lattice.sum()) - inside - float(values.sum()), 0.0)
-    return (step * k, step * i, step * j, values), left_out
+    everything = float(lattice.sum())
+    left_out = max(everything - inside - float(values.sum()), 0.0)
+    return (step * k, step * i, step * j, values), left_out, everything

@@ -1,0 +1,150 @@
+"""Whether the most likely place holds the robot (core/grid/failure.py), and what the
+localizer then publishes: a place found by one scan through the kidnap share, or a mode
+the motion did not carry there, is doubted until later scans confirm it (issue 38)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from estimation_nodes.core.geometry import compose
+from estimation_nodes.core.grid import failure
+from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.core.sim import planar
+from estimation_nodes.params.grid import build_grid_localizer_settings, default_odometry_noise
+from estimation_nodes.params.map_files import read_map_file
+from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults
+from tests.conftest import REPO
+
+CORRIDOR = REPO / "maps" / "corridor.yaml"
+#: Squared Mahalanobis distance in (x, y, yaw) beyond which a covariance rules an error
+#: out (chi-square, 3 degrees of freedom, 99.9 %).
+CHI2_999 = 16.27
+
+
+@pytest.mark.parametrize("doubt, kidnapped, jumped, expected", [
+    (0.0, 1e-9, False, 1e-9),                       # tracking: the share's crumb only
+    (0.0, 0.3, False, 0.3),                         # a third of the posterior came new
+    (0.0, 1e-9, True, 1.0),                         # the mode jumped: all of it is new
+    (1.0, 0.0, False, 1.0 - failure.RECOVERY),      # confirmed by a scan: it goes down
+    (0.5, 0.2, False, 0.2 + 0.8 * 0.5 * (1.0 - failure.RECOVERY)),
+])
+def test_the_doubt_is_the_new_mode_s_probability_and_what_is_left_of_the_old(
+        doubt, kidnapped, jumped, expected):
+    assert failure.judged(doubt, kidnapped, jumped) == pytest.approx(expected, rel=1e-12)
+
+
+def test_a_new_mode_is_trusted_after_several_scans_that_confirm_it():
+    doubts = [1.0]
+    for _ in range(4):
+        doubts.append(failure.judged(doubts[-1], 0.0, False))
+    np.testing.assert_allclose(doubts, [1.0, 0.5, 0.25, 0.125, 0.0625], rtol=1e-12)
+
+
+def corridor_settings(**values):
+    merged = spec_defaults(GRID_LOCALIZER_SPECS)
+    merged.update(map_file=str(CORRIDOR), heading_bins=36, odometry_source="topic", **values)
+    return build_grid_localizer_settings(merged)
+
+
+@pytest.mark.parametrize("after, jumps", [
+    ((2.3, 1.6, 0.0), False),         # 0.3 m on, as the odometry said
+    ((2.45, 1.65, 0.05), False),      # within the motion's spread and two cells
+    ((3.0, 1.6, 0.0), True),          # 0.7 m further than the odometry said
+    ((2.3, 1.6, 0.6), True),          # turned 34 degrees the odometry did not
+])
+def test_a_mode_beyond_the_prediction_s_reach_jumped(after, jumps):
+    model = corridor_settings().model
+    delta = grid.odometry_delta((0.0, 0.0, 0.0), (0.3, 0.0, 0.0))
+    assert failure.jumped(model, default_odometry_noise(), (2.0, 1.6, 0.0), delta,
+                          after) is jumps
+
+
+def test_anywhere_is_the_free_cells_second_moment_about_the_pose():
+    """Against an explicit sum over the free cells and the headings."""
+    model = corridor_settings().model
+    pose = (3.0, 1.0, 0.4)
+    xs, ys = model.cell_centres()
+    rows, cols = np.nonzero(model.free)
+    dx, dy = xs[cols] - pose[0], ys[rows] - pose[1]
+    turns = np.array([math.remainder(h - pose[2], 2 * math.pi) for h in model.headings()])
+    expected = np.diag([np.mean(dx * dx), np.mean(dy * dy), np.mean(turns ** 2)])
+    expected[0, 1] = expected[1, 0] = np.mean(dx * dy)
+    np.testing.assert_allclose(failure.anywhere_around(failure.spread_of(model), pose),
+                               expected, rtol=1e-9, atol=1e-12)
+
+
+def test_the_dense_filter_s_kidnap_share_is_its_posterior_probability():
+    """Against the sum written out: (kidnap / free states) x sum over the free states of
+    the likelihood, over the evidence of the whole mixture."""
+    settings = corridor_settings(belief_floor=0.0, kidnap_probability=1e-3)
+    model = settings.model
+    localization = settings.localization(model)
+    localization.set_prior((4.0, 1.6, 0.0), np.diag([0.01, 0.01, 0.003]))
+    ranges, angles = corridor_scan((6.0, 1.6, 0.0))          # taken 2 m from the prior
+    prior = localization.belief.copy()
+    localization.update(ranges, angles, odometry=(0.0, 0.0, 0.0))
+    likelihood = np.exp(settings.independent_beams / ranges.size * grid.scan_log_likelihood(
+        model, ranges, angles)) if ranges.size > settings.independent_beams else \
+        np.exp(grid.scan_log_likelihood(model, ranges, angles))
+    free_states = model.free.sum() * model.heading_bins
+    share = 1e-3 / free_states * float(np.sum(likelihood * model.free))
+    tracked = (1 - 1e-3) * float(np.sum(likelihood * prior))
+    assert localization.doubt == pytest.approx(share / (share + tracked), rel=1e-6)
+    assert localization.doubt > 1e-3     # the scan was taken where the prior is not
+
+
+def corridor_scan(pose, rng=None):
+    world = planar.planar_world(read_map_file(CORRIDOR))
+    angles = -math.pi + 2 * math.pi * np.arange(180) / 180
+    ranges = planar.ray_cast(world, pose, angles, 12.0)
+    if rng is not None:
+        ranges = planar.noisy_ranges(ranges, rng, 0.02, 0.0, 12.0)
+    valid = np.flatnonzero(ranges < 12.0)
+    valid = valid[np.linspace(0, valid.size - 1, 60).round().astype(int)]
+    return ranges[valid], angles[valid]
+
+
+def kidnapped_run(carried: float, steps: int = 20, at: int = 12) -> list[dict]:
+    """The robot drives along the corridor with grid_localizer's defaults, 0.3 m a scan
+    (every scan an update), seeded noisy scans; at step ``at`` it is carried ``carried``
+    m on, the odometry saying nothing. Each update's error, quality, doubt and squared
+    Mahalanobis distance under the published covariance."""
+    settings = corridor_settings()
+    localization: GridLocalization = settings.localization(settings.model)
+    rng = np.random.default_rng(38)
+    truth, odometry = (2.0, 1.6, 0.0), (0.0, 0.0, 0.0)
+    localization.set_prior(truth, np.diag([0.01, 0.01, 0.003]))
+    updates = []
+    for step in range(steps):
+        stamp = (step + 1) * 10**8
+        truth = compose(truth, (0.3 + (carried if step == at else 0.0), 0.0, 0.0))
+        odometry = compose(odometry, (0.3, 0.0, 0.0))
+        localization.on_odometry(odometry, stamp)
+        assert localization.due(stamp)
+        localization.update(*corridor_scan(truth, rng), stamp)
+        estimate = localization.estimate(settings.quality_radius, settings.quality_angle)
+        error = np.array([estimate.pose[0] - truth[0], estimate.pose[1] - truth[1],
+                          math.remainder(estimate.pose[2] - truth[2], 2 * math.pi)])
+        updates.append({"step": step, "error": math.hypot(*error[:2]),
+                        "quality": estimate.quality, "doubt": localization.doubt,
+                        "d2": float(error @ np.linalg.solve(estimate.covariance, error))})
+    return updates
+
+
+def test_a_place_found_again_after_a_kidnapping_is_doubted_then_confirmed():
+    """Carried 4.4 m along the corridor: the belief stays behind for a scan (explained
+    12 nats worse than usual, no match for the prior's odds against a kidnapping), then
+    the kidnap share finds the robot. Found by one scan, the place is published as
+    doubtful (the filter's own mass near it is 1) and trusted over the next scans."""
+    updates = kidnapped_run(4.4)
+    before, behind, found, after = updates[5:12], updates[12], updates[13], updates[14:]
+    assert all(u["quality"] > 0.99 and u["error"] < 0.1 for u in before), before
+    assert behind["error"] > 4.0       # the scan after the kidnapping is explained there
+    assert found["error"] < 0.1 and found["quality"] < 0.5 and found["doubt"] > 0.99
+    np.testing.assert_allclose([u["doubt"] for u in after[:3]], [0.5, 0.25, 0.125],
+                               rtol=1e-3)
+    assert after[2]["quality"] > 0.8 and after[2]["error"] < 0.1
+    # Where the place is doubted the covariance covers the robot anywhere in proportion.
+    assert found["d2"] < CHI2_999
