@@ -1,7 +1,7 @@
 """Faults on real logs: is the grid localizer ever confidently wrong?
 
     python bench/grid_faults.py [--log intel|aces ...] [--faults NAME ...] [--trials 20]
-        [--seed 38] [--details]
+        [--seed 38] [--details] [--node [--scan-rate 5]]
 
 The localizer of real_buildings.py (grid_localizer's defaults, the map from the log's
 corrected poses, its raw odometry and scans, the first corrected pose given; the core,
@@ -40,7 +40,16 @@ within 15 s, with the median times. ``--details`` lists every confidently wrong 
 with its quality, squared distance, the probability the floor dropped (``last_dropped``)
 and its log evidence against the median of the ten updates before it.
 
-Seeded and deterministic: the same command prints the same figures (but the time).
+With ``--node`` each faulted log (but the kidnap, whose trials branch off a run) goes
+through the running executables instead, as real_log_node.py runs a log: written as a
+CARMEN log (the truth as the laser's pose, the faulted odometry as the odometry),
+imported, mapped from the unfaulted log, played at ``--scan-rate`` scans a second (5:
+10 leaves ACES's updates, 75 ms and more, no time for every scan) into
+``grid_localizer`` (ROS domain NODE_DOMAIN, loopback); each published pose is scored with
+its covariance and the quality published before it.
+
+Seeded and deterministic: the same command prints the same figures (but the time; the
+node's, as the node's own run, may leave out a scan it had no time for).
 """
 
 from __future__ import annotations
@@ -49,6 +58,7 @@ import argparse
 import copy
 import math
 import sys
+import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -61,6 +71,7 @@ sys.path.insert(1, str(BENCH.parent))
 
 from real_buildings import chosen_logs, localizer, ns, resolve, scan_beams  # noqa: E402
 from real_logs import NEAR_M, NEAR_RAD, SURE, WRONG_M, WRONG_RAD  # noqa: E402
+from ros_env import confine_ros  # noqa: E402
 from timing import table  # noqa: E402
 
 from estimation_nodes.core.geometry import compose, relative  # noqa: E402
@@ -89,6 +100,8 @@ FAULTS = {
     "clutter_5s": (5.0, "scans"), "no_scans_3s": (3.0, "scans"),
 }
 ALL = ["none", *FAULTS, "kidnap"]
+#: --node: the ROS domain of the localizer, the play and the bench's node (ros_env.py).
+NODE_DOMAIN = 95
 
 
 @dataclass(frozen=True)
@@ -325,6 +338,42 @@ class Runner:
                 trial.updates.append(update)
 
 
+def write_carmen(events: list, path: Path) -> None:
+    """The events as a CARMEN log the importer reads back as they are: FLASER lines with
+    the truth as the laser's pose and the odometry then as its odometry, ODOM lines with
+    the odometry's own poses (no restart line: the poses are the raw track's)."""
+    lines, odometry = [], ORIGIN
+    for event in events:
+        if isinstance(event, Odometry):
+            odometry = event.pose
+            lines.append("ODOM " + " ".join(map(repr, event.pose)) + f" 0 0 0 {event.t!r} "
+                         f"bench {event.t!r}")
+        else:
+            lines.append(f"FLASER {event.ranges.size} "
+                         + " ".join(repr(float(r)) for r in event.ranges) + " "
+                         + " ".join(map(repr, (*event.truth, *odometry)))
+                         + f" {event.t!r} bench {event.t!r}")
+    path.write_text("\n".join(lines) + "\n")
+
+
+def through_node(name: str, events: list, work: Path, scan_rate: float) -> list[Update]:
+    """``events`` through the running grid_localizer (real_log_node.py's run at
+    ``scan_rate`` scans a second, the map from the unfaulted log): its published poses,
+    each with the quality published before it and its covariance."""
+    from real_log_node import play
+
+    log_path = work / "faulted.log"
+    write_carmen(events, log_path)
+    options = argparse.Namespace(scan_rate=scan_rate, resolution=0.1, heading_bins=72,
+                                 max_odom_jump=5.0, seconds=0.0, tf=False, record=None)
+    played = play(options, log_path, work, map_from=resolve(name))
+    watcher = played.watcher
+    truth = {ns(e.t): e for e in events if isinstance(e, Reading)}
+    return [Update(truth[stamp].t, truth[stamp].truth, pose, watcher.quality_of(stamp),
+                   watcher.covariances[stamp], math.nan, math.nan)
+            for stamp, pose in sorted(watcher.poses.items()) if stamp in truth]
+
+
 def kidnap_trials(log: carmen.CarmenLog, count: int, rng: np.random.Generator) -> list[Trial]:
     """``count`` trials: scans k and m drawn as the module's docstring says, sorted by k."""
     poses = np.array([scan.pose[:2] for scan in log.scans])
@@ -404,16 +453,25 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=38, help="the seed (default: 38)")
     parser.add_argument("--details", action="store_true",
                         help="list every confidently wrong update")
+    parser.add_argument("--node", action="store_true",
+                        help="through the running grid_localizer (real_log_node.py's run; "
+                             "not the kidnap)")
+    parser.add_argument("--scan-rate", type=float, default=5.0,
+                        help="--node: scans a second the play makes (default: %(default)s)")
     args = parser.parse_args()
     logs = chosen_logs(args.log, "grid_faults")
+    if args.node:
+        confine_ros(NODE_DOMAIN)
     rows, listed = [], []
     for name in logs:
         log = carmen.read_log(resolve(name))
         runner = Runner(log)
         starts = places(runner.events)
         for fault in [f for f in ALL if f in args.faults]:
-            if fault == "none" and "kidnap" in args.faults:
+            if fault == "none" and "kidnap" in args.faults and not args.node:
                 continue        # the kidnap's pass is the unfaulted one
+            if fault == "kidnap" and args.node:
+                continue        # trials branch off a run: the core's only
             started = time.monotonic()
             # One stream of random numbers per log and fault, whatever else is run.
             rng = np.random.default_rng([args.seed, ALL.index(fault), len(log.scans)])
@@ -432,8 +490,13 @@ def main() -> None:
                     events = with_odometry_fault(runner.events, fault, starts)
                 else:
                     events = with_scan_fault(runner.events, fault, starts, rng)
-                updates = runner.run(events)
-                rows.append(row(name, fault, updates) + ["-", "-"])
+                if args.node:
+                    with tempfile.TemporaryDirectory() as work:
+                        updates = through_node(name, events, Path(work), args.scan_rate)
+                else:
+                    updates = runner.run(events)
+                rows.append(row(name, fault + (" (node)" if args.node else ""), updates)
+                            + ["-", "-"])
                 listed += details(name, fault, updates)
             print(f"grid_faults: {name} {fault} in {time.monotonic() - started:.0f} s",
                   file=sys.stderr, flush=True)

@@ -41,6 +41,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -72,16 +73,21 @@ def executable(name: str) -> str:
 TF_LASER_AHEAD = 0.25
 
 
-def prepare(log_path: Path, work: Path, laser_ahead: float) -> tuple[Path, Path]:
-    """The recording and the map, made by the package's own tools."""
+def prepare(log_path: Path, work: Path, laser_ahead: float,
+            map_from: Path | None = None) -> tuple[Path, Path]:
+    """The recording and the map, made by the package's own tools; the map from the log
+    ``map_from`` where given (a log with faults injected is mapped from its clean one)."""
     recording, stem = work / "run.mcap", work / "map"
-    subprocess.run([executable("estimation_import"), "carmen", str(log_path), "-o",
-                    str(recording), "--range-max", str(RANGE_MAX),
-                    "--laser-ahead", str(laser_ahead)], check=True,
-                   stdout=subprocess.DEVNULL)
+    for source, target in ((log_path, recording), (map_from, work / "mapped.mcap")):
+        if source is not None:
+            subprocess.run([executable("estimation_import"), "carmen", str(source), "-o",
+                            str(target), "--range-max", str(RANGE_MAX),
+                            "--laser-ahead", str(laser_ahead)], check=True,
+                           stdout=subprocess.DEVNULL)
     # The truth is base_link's: the map is made from the laser's poses, laser_ahead before.
-    subprocess.run([executable("estimation_map"), str(recording), "-o", str(stem),
-                    "--laser-pose", str(laser_ahead), "0", "0"],
+    subprocess.run([executable("estimation_map"),
+                    str(recording if map_from is None else work / "mapped.mcap"),
+                    "-o", str(stem), "--laser-pose", str(laser_ahead), "0", "0"],
                    check=True, stdout=subprocess.DEVNULL)
     return recording, stem.with_suffix(".yaml")
 
@@ -102,6 +108,7 @@ class Watcher:
         from geometry_msgs.msg import PoseWithCovarianceStamped
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.node import Node
+        from std_msgs.msg import Float64
 
         from estimation_nodes.nodes.qos import latched_qos
 
@@ -110,11 +117,19 @@ class Watcher:
 
         self.node = Node("real_log_bench")
         self.poses: dict[int, tuple[float, float, float]] = {}
+        #: Each pose's covariance in (x, y, yaw) and publish time, by its stamp; the
+        #: (publish time, value) of each localization_quality, which the node publishes
+        #: just before its pose.
+        self.covariances: dict[int, np.ndarray] = {}
+        self.published: dict[int, int] = {}
+        self.qualities: list[tuple[int, float]] = []
         #: Everything heard on /tf and /tf_static, kept for the whole run.
         self.tree = TransformBuffer(cache_time_ns=1 << 62)
         TransformListener(self.node, self.tree)
         self.diagnostics: dict[str, str] = {}
         self.node.create_subscription(PoseWithCovarianceStamped, "pose", self._on_pose,
+                                      latched_qos(1000))
+        self.node.create_subscription(Float64, "localization_quality", self._on_quality,
                                       latched_qos(1000))
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_diagnostics,
                                       10)
@@ -170,11 +185,26 @@ class Watcher:
             found[stamp] = (map_odom * odom_base).as_planar()
         return found
 
-    def _on_pose(self, msg) -> None:
-        from estimation_nodes.nodes.grid_messages import planar_pose
+    def _on_pose(self, msg, info) -> None:
+        from estimation_nodes.nodes.grid_messages import covariance_3x3, planar_pose
+        from estimation_nodes.nodes.stamps import published_ns
 
         stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
         self.poses[stamp] = planar_pose(msg.pose.pose)
+        self.covariances[stamp] = covariance_3x3(msg.pose.covariance)
+        self.published[stamp] = published_ns(info)
+
+    def _on_quality(self, msg, info) -> None:
+        from estimation_nodes.nodes.stamps import published_ns
+
+        self.qualities.append((published_ns(info), msg.data))
+
+    def quality_of(self, stamp: int) -> float:
+        """The quality published last before the pose of ``stamp`` (by the publisher's
+        clock: a subscriber's callbacks for the two topics run in no set order)."""
+        sent = self.published[stamp]
+        before = [value for published, value in self.qualities if published <= sent]
+        return before[-1] if before else math.nan
 
     def _on_diagnostics(self, msg) -> None:
         if msg.status and msg.status[0].name.startswith("grid_localizer"):
@@ -202,12 +232,45 @@ class Watcher:
         return spin_until(self.executor, condition, timeout)
 
 
+@dataclass
+class Played:
+    """A run of a log through the node: the log, the bench's node with what it heard,
+    the play's rate over the log's and how long it played, the localizer's peak memory,
+    where the laser sat, and the localizer's parameters and map."""
+
+    log: carmen.CarmenLog
+    watcher: Watcher
+    rate: float
+    played_s: float
+    peak: float
+    laser_ahead: float
+    parameters_yaml: str
+    map_yaml: Path
+
+
 def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]:
+    played = play(args, log_path, work)
+    log, watcher = played.log, played.watcher
+    if args.picture:
+        draw(log, watcher, played.map_yaml, args.picture, log_path.name)
+    rows = summary(log, watcher, played.rate, played.played_s, played.peak,
+                   played.laser_ahead)
+    if watcher.recorder is not None:
+        rows += watcher.recorder.write_and_replay(
+            args.record, {"parameters_yaml": played.parameters_yaml, "kind": "grid"},
+            executable("estimation_replay"))
+    return rows
+
+
+def play(args: argparse.Namespace, log_path: Path, work: Path,
+         map_from: Path | None = None) -> Played:
+    """The log through the running localizer (``prepare``'s map, ``map_from``'s where
+    given), as the module's docstring says."""
     import rclpy
 
     log = carmen.read_log(log_path)
     laser_ahead = TF_LASER_AHEAD if args.tf else 0.0
-    recording, map_yaml = prepare(log_path, work, laser_ahead)
+    recording, map_yaml = prepare(log_path, work, laser_ahead, map_from)
     if args.record:
         map_yaml = beside(args.record, map_yaml)
     period = float(np.median(np.diff([scan.t for scan in log.scans])))
@@ -223,7 +286,7 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
     watcher = Watcher()
     if args.record:
         watcher.record(args.tf)
-    play = None
+    player = None
     try:
         if args.tf:
             watcher.activate("grid_localizer")
@@ -238,26 +301,20 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
         inputs = ["/scan", "/tf", "/tf_static", "--clock"] if args.tf else ["/scan", "/odom"]
         play_command = [executable("estimation_play"), str(recording), "--rate", f"{rate:g}",
                         "--topics", *inputs, "--wait-for-subscribers", "30", "--delay", "2"]
-        play = subprocess.Popen(play_command, env=env, stdout=(work / "play.log").open("w"),
-                                stderr=subprocess.STDOUT)
+        player = subprocess.Popen(play_command, env=env,
+                                  stdout=(work / "play.log").open("w"),
+                                  stderr=subprocess.STDOUT)
         limit = args.seconds or (log.scans[-1].t - log.scans[0].t) / rate + 60
         started = time.monotonic()
-        watcher.spin(lambda: play.poll() is not None, limit)
+        watcher.spin(lambda: player.poll() is not None, limit)
         played_s = time.monotonic() - started
-        if play.poll() is None:
-            stop_process(play)      # --seconds: the first part of the log only
+        if player.poll() is None:
+            stop_process(player)      # --seconds: the first part of the log only
         watcher.spin(lambda: False, 3.0)     # the last update and diagnostics
         peak = peak_mib(localizer.pid)
     finally:
-        end_run(play, localizer, watcher.node)
-    if args.picture:
-        draw(log, watcher, map_yaml, args.picture, log_path.name)
-    rows = summary(log, watcher, rate, played_s, peak, laser_ahead)
-    if watcher.recorder is not None:
-        rows += watcher.recorder.write_and_replay(
-            args.record, {"parameters_yaml": parameters_yaml, "kind": "grid"},
-            executable("estimation_replay"))
-    return rows
+        end_run(player, localizer, watcher.node)
+    return Played(log, watcher, rate, played_s, peak, laser_ahead, parameters_yaml, map_yaml)
 
 
 def beside(recording: Path, map_yaml: Path) -> Path:
