@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from estimation_nodes.core.grid import failure
 from estimation_nodes.core.grid import steps as grid
 from estimation_nodes.core.validation import FloatArray
 
@@ -198,7 +199,8 @@ def lattice_cells(model: grid.GridModel, phase: int) -> np.ndarray:
 
 def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridModel,
                   ranges: FloatArray, angles: FloatArray, weight: float, share: float,
-                  floor: float, compiled: bool = True, phase: int = 0) -> Correction:
+                  floor: float, compiled: bool = True, phase: int = 0,
+                  predicted: failure.Pose | None = None) -> Correction:
     """The correction of a belief held in disjoint ``boxes`` (``priors``: each box's part,
     zero elsewhere). With ``share`` > 0 the prior is (1 - share) x that belief plus
     ``share`` spread evenly over the free states of a coarse lattice's part ``phase``
@@ -210,6 +212,9 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridMo
     The lattice's posterior within the boxes joins theirs; outside them its states of
     probability ``floor`` or more are kept (``Correction.kept``) and the rest, all below
     the floor, left out (``Correction.left_out``, the whole renormalized over the rest).
+
+    With ``predicted`` (the predicted pose) the lattice's states around it also give the
+    posterior of the odometry failing (``failure.astray_in``: ``Correction.astray``).
     """
     step = KIDNAP_STEP
     lattice_free = lattice_cells(model, phase)
@@ -235,10 +240,14 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridMo
             weighted *= 1.0 - share
         parts.append(weighted)
     total = sum(float(part.sum()) for part in parts)
+    astray = None
     if lattice_ll is not None:
-        lattice, _ = grid._weighted(lattice_ll, peak, lattice_free)
+        lattice, found = grid._weighted(lattice_ll, peak, lattice_free)
+        total += found * share / free_states
+        if predicted is not None and total > 0.0:
+            astray = failure.astray_in(model, lattice, step, lattice_free, total,
+                                      predicted)
         lattice *= share / free_states
-        total += float(lattice.sum())
     if not total > 0.0:
         raise grid.ZeroEvidenceError("every state with probability rules the scan out")
     log_evidence = peak + math.log(total)
@@ -253,7 +262,7 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridMo
         for part in parts:
             part /= remaining
         kept = (kept[0], kept[1], kept[2], kept[3] / remaining)
-    return Correction(parts, boxes, kept, log_evidence, left_out, kidnapped)
+    return Correction(parts, boxes, kept, log_evidence, left_out, kidnapped, astray)
 
 
 @dataclass
@@ -270,6 +279,8 @@ class Correction:
     #: The posterior probability of the kidnap share (0 without one): that the scan was
     #: explained by a place the robot was carried to, not by the tracked belief.
     kidnapped: float = 0.0
+    #: The odometry-failure component's posterior (grid/failure.py), where asked for.
+    astray: failure.Astray | None = None
 
 
 def _no_states() -> States:
