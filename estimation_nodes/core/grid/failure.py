@@ -256,20 +256,22 @@ def astray_in(model: grid.GridModel, weights: FloatArray, step: int, cells: np.n
     if prior is None:
         return Astray.none()
     bearings, places = prior
-    window = np.ascontiguousarray(weights[:, r0:r1, c0:c1])
-    # The evidence as a product with the prior's two factors (a pass over the window);
-    # the states only where the component holds probability worth a figure.
-    total = float(bearings @ (window.reshape(window.shape[0], -1) @ places.ravel()))
+    # The disc's scored lattice cells only (a gather of half the window's cells, not a
+    # copy of the window); the evidence as a product with the prior's two factors.
+    rows_in, cols_in = np.nonzero(places)
+    scores = weights[:, r0 + rows_in, c0 + cols_in]
+    near = places[rows_in, cols_in]
+    total = float(bearings @ (scores @ near))
     if not total > 0.0:
         return Astray.none()
     share = ASTRAY_PROBABILITY * total
     mass = share / (share + (1.0 - ASTRAY_PROBABILITY) * tracked)
     if mass < ASTRAY_NEGLIGIBLE:
         return Astray.none()
-    inside = window * bearings[:, None, None] * places[None]
-    k, i, j = np.nonzero(inside >= ASTRAY_KEPT * float(inside.max()))
-    p = inside[k, i, j]
-    return Astray(xs[c0 + j], ys[r0 + i], headings[k], p * (mass / p.sum()))
+    inside = scores * bearings[:, None] * near[None, :]
+    k, n = np.nonzero(inside >= ASTRAY_KEPT * float(inside.max()))
+    p = inside[k, n]
+    return Astray(xs[c0 + cols_in[n]], ys[r0 + rows_in[n]], headings[k], p * (mass / p.sum()))
 
 
 def _astray_prior(dx: FloatArray, dy: FloatArray, cells: np.ndarray,
