@@ -51,18 +51,32 @@ class SensorConfig:
     differential: bool = False
     queue_size: int = 10
 
-    @property
+    # What follows from the configuration alone is worked out once (a frozen dataclass
+    # keeps a cached_property in its __dict__): every message asks it.
+
+    @functools.cached_property
     def pose_part(self) -> str:
         """The name the peer gives the pose part's measurements."""
         return f"{self.name}_pose" if self.kind == "odom" else self.name
 
-    @property
+    @functools.cached_property
     def measures_pose(self) -> bool:
         return self.kind in ("odom", "pose") and any(self.update[POSE])
 
-    @property
+    @functools.cached_property
     def measures_twist(self) -> bool:
         return self.kind in ("odom", "twist") and any(self.update[TWIST])
+
+    @functools.cached_property
+    def imu_parts(self) -> tuple[bool, bool, bool]:
+        """Whether an IMU's attitude, angular rates and linear acceleration are asked for."""
+        return (any(self.update[ORIENTATION]), any(self.update[VROLL:VROLL + 3]),
+                any(self.update[ACCELERATION]))
+
+    @functools.cached_property
+    def rate_entries(self) -> tuple[bool, ...]:
+        """The update mask of an IMU's rates part: an IMU has no linear velocity."""
+        return _entries(self.update, VROLL, VROLL + 3)
 
 
 #: The name ``set_pose`` goes by in the counts.
@@ -277,18 +291,17 @@ class SensorInputs:
             return []
         names = _imu_parts(sensor.name)
         update = sensor.update
-        has_orientation = abs(msg.orientation_covariance[0] + 1.0) >= 1e-9
+        asks_attitude, asks_rates, asks_acceleration = sensor.imu_parts
+        has_orientation = _present(msg.orientation_covariance)
         q = msg.orientation
         quaternion = (q.x, q.y, q.z, q.w)
-        attitude = any(update[ROLL:ROLL + 3]) and has_orientation \
+        attitude = asks_attitude and has_orientation \
             and self._newer(names.pose, stamp) \
             and self._finite(names.pose, msg.orientation_covariance)
-        rates = any(update[VROLL:VROLL + 3]) \
-            and abs(msg.angular_velocity_covariance[0] + 1.0) >= 1e-9 \
+        rates = asks_rates and _present(msg.angular_velocity_covariance) \
             and self._newer(names.twist, stamp) \
             and self._finite(names.twist, msg.angular_velocity_covariance)
-        acceleration = any(update[ACCELERATION]) \
-            and abs(msg.linear_acceleration_covariance[0] + 1.0) >= 1e-9 \
+        acceleration = asks_acceleration and _present(msg.linear_acceleration_covariance) \
             and self._newer(names.acceleration, stamp) \
             and self._finite(names.acceleration, msg.linear_acceleration_covariance)
         if not (attitude or rates or acceleration):
@@ -311,7 +324,7 @@ class SensorInputs:
                                            _matrix3(msg.orientation_covariance), mount))
         if rates:
             made.append(inputs.imu_measurement(
-                stamp, z, covariance, _entries(update, VROLL, VROLL + 3), TWIST, mount,
+                stamp, z, covariance, sensor.rate_entries, TWIST, mount,
                 sensor.twist_threshold, names.twist))
         if acceleration:
             made.append(inputs.imu_measurement(stamp, z, covariance, update, ACCELERATION,
@@ -343,6 +356,11 @@ class SensorInputs:
             return rotation_from_rpy(*fusion.x[ROLL:ROLL + 3]) @ mount.rotation
         reported = rotation_from_quaternion(*quaternion)
         return reported @ mount.rotation if sensor.relative else reported
+
+
+def _present(covariance) -> bool:
+    """Whether an IMU message has the part of this covariance (-1 first: it has not)."""
+    return abs(float(covariance[0]) + 1.0) >= 1e-9
 
 
 def _vector(v) -> np.ndarray:
