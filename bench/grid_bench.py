@@ -37,7 +37,9 @@ sys.path.insert(1, str(BENCH.parent))
 from timing import table  # noqa: E402
 
 from estimation_nodes.core.grid import likelihood_field  # noqa: E402
-from estimation_nodes.core.grid import steps as grid  # noqa: E402
+from estimation_nodes.core.grid.laser import correct_scan  # noqa: E402
+from estimation_nodes.core.grid.model import compiled_kernels  # noqa: E402
+from estimation_nodes.core.grid.motion import gaussian_taps, motion_noise, predict  # noqa: E402
 from estimation_nodes.params import map_files as maps  # noqa: E402
 from estimation_nodes.params.grid import default_odometry_noise, default_sensor_field  # noqa: E402
 
@@ -86,10 +88,10 @@ def straightforward_predict(belief, model, delta, noise):
                 kk = ((k0 + dk) % bins).astype(np.int64)
                 ok = (rr >= 0) & (rr < rows) & (cc >= 0) & (cc < cols) & (w > 0)
                 np.add.at(moved, (kk[ok], rr[ok], cc[ok]), (belief * w)[ok])
-    sigma_cells, sigma_bins = grid.motion_noise(delta, noise, model)
-    moved = convolve1d(moved, grid.gaussian_taps(sigma_bins), axis=0, mode="wrap")
+    sigma_cells, sigma_bins = motion_noise(delta, noise, model)
+    moved = convolve1d(moved, gaussian_taps(sigma_bins), axis=0, mode="wrap")
     for axis in (1, 2):
-        moved = convolve1d(moved, grid.gaussian_taps(sigma_cells), axis=axis, mode="constant")
+        moved = convolve1d(moved, gaussian_taps(sigma_cells), axis=axis, mode="constant")
     moved *= model.free[None]
     return moved / moved.sum()
 
@@ -123,15 +125,15 @@ def main() -> None:
     ranges = rng.uniform(0.3, 8.0, 60)
     angles = np.linspace(-math.pi, math.pi, 60, endpoint=False)
     noise = default_odometry_noise()
-    grid.compiled_kernels(belief.size)             # compile or load before timing
+    compiled_kernels(belief.size)             # compile or load before timing
     copy = timed(lambda: belief.copy(), args.repeats)[0]
     floors = {"prediction": 4 * copy, "correction": copy}
     steps = {
-        "prediction": (lambda: grid.predict(belief, model, DELTA, noise),
-                       lambda: grid.predict(belief, model, DELTA, noise, compiled=False),
+        "prediction": (lambda: predict(belief, model, DELTA, noise),
+                       lambda: predict(belief, model, DELTA, noise, compiled=False),
                        lambda: straightforward_predict(belief, model, DELTA, noise)),
-        "correction": (lambda: grid.correct_scan(belief, model, ranges, angles),
-                       lambda: grid.correct_scan(belief, model, ranges, angles, compiled=False),
+        "correction": (lambda: correct_scan(belief, model, ranges, angles),
+                       lambda: correct_scan(belief, model, ranges, angles, compiled=False),
                        lambda: straightforward_correct(belief, model, ranges, angles)),
     }
     print(f"grid {model.shape[2]} x {model.shape[1]} x {model.shape[0]} = {belief.size:,} "
@@ -148,9 +150,9 @@ def main() -> None:
                      f"{plain_t[0] * 1e3:.0f} ms", f"{plain_t[0] / ours_t[0]:.0f}x",
                      f"{floors[name] * 1e3:.1f} ms", f"{ours_t[0] / floors[name]:.1f}",
                      f"{peak / belief.nbytes:.1f}x"])
-    ours_pred = grid.predict(belief, model, DELTA, noise)
+    ours_pred = predict(belief, model, DELTA, noise)
     plain_pred = straightforward_predict(belief, model, DELTA, noise)
-    ours_post = grid.correct_scan(belief, model, ranges, angles)[0]
+    ours_post = correct_scan(belief, model, ranges, angles)[0]
     plain_post = straightforward_correct(belief, model, ranges, angles)
     print(table(["step", "ours (compiled)", "numpy's path", "numpy / ours", "straightforward "
                  "numpy", "straightforward / ours", "bandwidth floor", "ours / floor",

@@ -50,7 +50,7 @@ sys.path.insert(1, str(BENCH.parent))
 import building_map  # noqa: E402
 from timing import table  # noqa: E402
 
-from estimation_nodes.core.grid import steps as grid  # noqa: E402
+from estimation_nodes.core.grid.model import COMPILED_MIN_STATES, compiled_kernels  # noqa: E402
 from estimation_nodes.core.sim import planar  # noqa: E402
 from estimation_nodes.params.grid import (  # noqa: E402
     build_grid_localizer_settings,
@@ -185,7 +185,7 @@ def main() -> None:
                              "several: a row for each")
     args = parser.parse_args()
     kinds = [kind == "kidnap" for kind in args.runs.split(",")]
-    grid.compiled_kernels(grid.COMPILED_MIN_STATES)
+    compiled_kernels(COMPILED_MIN_STATES)
     rows = []
     default_beams = spec_defaults(GRID_LOCALIZER_SPECS)["laser_independent_beams"]
     seeds = range(args.first_seed, args.first_seed + args.seeds)

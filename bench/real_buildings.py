@@ -51,7 +51,7 @@ sys.path.insert(1, str(BENCH.parent))
 import amcl_baseline  # noqa: E402
 from timing import table  # noqa: E402
 
-from estimation_nodes.core.grid import steps as grid  # noqa: E402
+from estimation_nodes.core.grid.model import COMPILED_MIN_STATES, compiled_kernels  # noqa: E402
 from estimation_nodes.core.grid.likelihood_field import grid_model  # noqa: E402
 from estimation_nodes.core.grid.mapping import MappingModel, OccupancyGridMapper  # noqa: E402
 from estimation_nodes.params.grid import build_grid_localizer_settings  # noqa: E402
@@ -97,7 +97,7 @@ def localizer(log: carmen.CarmenLog, resolution: float, heading_bins: int,
     if not global_start:
         localization.set_prior(log.scans[0].pose,
                                np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2]))
-    grid.compiled_kernels(grid.COMPILED_MIN_STATES)
+    compiled_kernels(COMPILED_MIN_STATES)
     return localization, settings
 
 

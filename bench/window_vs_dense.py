@@ -37,7 +37,7 @@ from real_buildings import (  # noqa: E402
 )
 from timing import table  # noqa: E402
 
-from estimation_nodes.core.grid import steps as grid  # noqa: E402
+from estimation_nodes.core.grid.model import COMPILED_MIN_STATES, compiled_kernels  # noqa: E402
 from estimation_nodes.core.grid.likelihood_field import grid_model  # noqa: E402
 from estimation_nodes.params.grid import build_grid_localizer_settings  # noqa: E402
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults  # noqa: E402
@@ -58,7 +58,7 @@ def localizers(log, floors: list[float]):
         loc.set_prior(log.scans[0].pose,
                       np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2]))
         made.append(loc)
-    grid.compiled_kernels(grid.COMPILED_MIN_STATES)
+    compiled_kernels(COMPILED_MIN_STATES)
     return settings, made
 
 

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation_nodes.core.errors import InvalidInputError, MapError
+from estimation_nodes.core.grid.model import GridModel, mounting_pose
 from estimation_nodes.core.grid.occupancy import FREE, OCCUPIED, OccupancyMap
 from estimation_nodes.core.grid.scan_fit import FitField
-from estimation_nodes.core.grid.steps import GridModel, mounting_pose
 from estimation_nodes.core.validation import (
     as_real_array,
     check_integer,
