@@ -7,7 +7,7 @@ by the scans alone; 0 keeps the exact filter (recovery through
 ``global_localization``).
 
 With ``independent_beams`` K, a scan of N > K beams corrects with its likelihood raised
-to K / N (``steps.scan_weight``): its beams are not N independent measurements, and
+to K / N (``laser.scan_weight``): its beams are not N independent measurements, and
 taken as such they make the belief sure of a place the next scans may rule out.
 
 As AMCL: odometry is followed continuously, and a scan updates the filter
@@ -33,7 +33,7 @@ renew it, plus what belief_floor dropped (``lost_probability``): the quality is 
 much lower, the covariance that much the robot's anywhere on the free cells.
 
 Each method checks what it is given (a pose of three finite numbers, a scan of
-readings as ``steps.check_scan`` says, a stamp that is an integer) and raises
+readings as ``laser.check_scan`` says, a stamp that is an integer) and raises
 ``InvalidInputError`` naming it; the belief it holds is its own, so the steps
 on it are not checked again.
 """
@@ -301,7 +301,7 @@ class GridLocalization:
                stamp_ns: int | None = None, odometry: Pose | None = None) -> None:
         """Predict with the odometry from the last update to the scan's time (``odometry``
         as in ``due``), correct with the scan: the beams to score, without the readings of
-        no return (see ``steps.check_scan``: a NaN, infinite or negative range is refused)."""
+        no return (see ``laser.check_scan``: a NaN, infinite or negative range is refused)."""
         ranges, angles = check_scan(ranges, angles)
         pose = self._pose_for(stamp_ns, odometry)
         if pose is None:
@@ -395,7 +395,7 @@ class GridLocalization:
         return window.crop(self.model, box), window.window_of(self.belief, box)
 
     def estimate(self, radius: float, angle: float) -> Estimate:
-        """The most likely pose (steps.refined_pose of the most likely state), the
+        """The most likely pose (belief.refined_pose of the most likely state), the
         covariance around it, and the probability within ``radius`` (m) and ``angle``
         (rad) of it: sums over the windows; both for a belief that may have lost the
         robot (``lost_probability``): the quality that much lower, the covariance the

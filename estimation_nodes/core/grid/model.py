@@ -19,7 +19,7 @@ the model's or with values outside [0, 1], a number that is NaN or infinite,
 a scan with a range that is no reading (see ``check_scan``). Results are finite.
 The checks of a belief are two numpy reductions; the running localizer
 (localization.py) checks its new inputs once and calls the unchecked steps
-(underscored here) on the belief it holds.
+(underscored, beside each public one) on the belief it holds.
 
 The map's rotation (an OccupancyGrid origin with yaw) is not supported here:
 the state grid refuses it (core/grid/likelihood_field.py).
@@ -77,7 +77,7 @@ class GridModel:
     #: The largest |log likelihood| one beam can score (in the field or outside it).
     log_bound: float = field(init=False, repr=False, compare=False)
     #: The field at the map's own resolution (grid/scan_fit.py's FitField) that refines
-    #: the published pose, or None: the pose is the belief's (steps.refined_pose).
+    #: the published pose, or None: the pose is the belief's (belief.refined_pose).
     scan_fit: Any = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:

@@ -2,7 +2,7 @@
 
 The grid filter's states are 0.1 m and 5 degrees apart, and its likelihood field
 is the map's reduced to that grid (each state cell takes the nearest obstacle of
-its map cells). The belief's mean around its mode (``steps.refined_pose``) is
+its map cells). The belief's mean around its mode (``belief.refined_pose``) is
 finer than the grid, but it is still the coarse field's answer. Here the pose
 is moved, within a state cell and a heading bin of that mean, to where the last
 scan's beams fit the map's own likelihood field best (the field at the map's

@@ -1,4 +1,4 @@
-"""The belief's support: the steps of grid/steps.py over the box of states with probability.
+"""The belief's support: the grid filter's steps over the box of states with probability.
 
 A tracked robot's belief is zero on all but a few square metres of a building,
 and a step never moves probability further than its motion and its noise
@@ -14,7 +14,7 @@ reach. So the filter runs over a window of (rows, columns), all headings:
   the predictions are normalized together;
 - the prediction runs on the window's crop of the belief and the map
   (``crop``), the correction scores the scan over the window only
-  (``steps._scan_log_likelihood(..., box=)``).
+  (``laser._scan_log_likelihood(..., box=)``).
 
 This is exact: outside the grown box the dense filter's prediction is zero
 (a blur or a shift of zeros), so its posterior is zero there as well, and
