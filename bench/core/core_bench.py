@@ -21,8 +21,8 @@ import numpy as np
 from filterpy import discrete_bayes
 from filterpy.kalman import KalmanFilter
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from timing import compare, format_seconds, table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import compare, format_seconds, table  # noqa: E402
 
 from estimation_nodes.core.kalman import linear as kalman  # noqa: E402
 from estimation_nodes.core.tiles import histogram  # noqa: E402

@@ -33,17 +33,15 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ros_env import confine_ros  # noqa: E402
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import RELAY_NODE, REPO, confine_ros, table  # noqa: E402
 
 from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
 
-BENCH = Path(__file__).resolve().parent
 WINDOW = 100
 
 
-TRACKING = BENCH.parent / "msgs_config" / "tracking_2d.yaml"
+TRACKING = REPO / "msgs_config" / "tracking_2d.yaml"
 
 
 #: The CPUs of the node under test and of this driver, when the machine has two or more:
@@ -68,7 +66,7 @@ def start(kind: str, env: dict, params: tuple[str, ...] = ()) -> subprocess.Pope
         command = [sys.executable, "-m", "estimation_nodes.nodes.estimator", "--ros-args",
                    *params, "-p", "history_depth:=1000", "--log-level", "warn"]
     else:
-        command = [sys.executable, str(BENCH / "relay_node.py")]
+        command = [sys.executable, str(RELAY_NODE)]
     cpus = NODE_CPUS
     return subprocess.Popen(command, env=env, preexec_fn=(
         (lambda: os.sched_setaffinity(0, cpus)) if cpus else None))

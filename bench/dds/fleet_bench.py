@@ -27,14 +27,12 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-from ros_env import confine_ros  # noqa: E402
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import REPO, confine_ros, table  # noqa: E402
 
 from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
 
-SCENARIO = BENCH.parent / "msgs_config" / "localization.yaml"
+SCENARIO = REPO / "msgs_config" / "localization.yaml"
 STEPS = 40
 NODES = ("estimator", "tile_sensor", "motion_commander")
 
@@ -54,7 +52,7 @@ def start_fleet(robots: int, env: dict) -> dict[str, list[subprocess.Popen]]:
                        "--log-level", "warn"]
             fleet[name].append(subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL,
                                                 stderr=subprocess.STDOUT,
-                                                cwd=BENCH.parent))
+                                                cwd=REPO))
     return fleet
 
 

@@ -22,17 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(1, str(Path(__file__).resolve().parents[1]))
-from dds_bench import start  # noqa: E402
-from ros_env import confine_ros  # noqa: E402
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench, tests
+from bench.common import confine_ros, table  # noqa: E402
+from bench.dds.dds_bench import start  # noqa: E402
 
 from estimation_nodes.tools.demo import graph_runtime  # noqa: E402
 from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
 from tests.support import resident_mib, write_world  # noqa: E402
 
-BENCH = Path(__file__).resolve().parent
 
 
 def main() -> None:

@@ -33,12 +33,9 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-from fusion_offline import BAGS, FILES, HUSKY_IMU_MOUNT, SHARED  # noqa: E402
-from real_log_node import executable  # noqa: E402
-from ros_env import confine_ros  # noqa: E402
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import RELAY_NODE, confine_ros, executable, table  # noqa: E402
+from bench.fusion.fusion_offline import BAGS, FILES, HUSKY_IMU_MOUNT, SHARED  # noqa: E402
 
 from estimation_nodes.params.fusion import fusion_config, parameters_of_file  # noqa: E402
 from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
@@ -121,7 +118,7 @@ def start(target: str, bag: str, kind: str, inputs: dict[str, str], work: Path,
           env: dict) -> subprocess.Popen:
     log = work / f"{target}.log"
     if target == "relay":
-        command = [sys.executable, str(BENCH / "relay_node.py"), "fusion",
+        command = [sys.executable, str(RELAY_NODE), "fusion",
                    *(f"{topic}:{k}" for topic, k in inputs.items())]
     else:
         params = FILES / f"test_{kind}_localization_node_bag{BAGS[bag]}.yaml"

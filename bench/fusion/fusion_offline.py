@@ -24,16 +24,15 @@ import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import REPO, SHARED_DATA, table  # noqa: E402
 
 from estimation_nodes.core.fusion import steps  # noqa: E402
 from estimation_nodes.params.fusion import fusion_config, parameters_of_file  # noqa: E402
 from estimation_nodes.tools.fusion import offline  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
-SHARED = ROOT.parent / "shared" / "data" / "robot_localization"
-FILES = ROOT / "tests" / "data" / "robot_localization"
+SHARED = SHARED_DATA / "robot_localization"
+FILES = REPO / "tests" / "data" / "robot_localization"
 #: test1.bag has no /tf: the IMU's mount as the peer's test publishes it (test_fusion_bags.py).
 HUSKY_IMU_MOUNT = "imu_link=0,-0.3,0.52,1.570796327,0,-1.570796327"
 BAGS = {"test1.bag": "1", "test2.bag": "2"}

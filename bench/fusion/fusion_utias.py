@@ -35,15 +35,14 @@ from types import SimpleNamespace
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import SHARED_DATA, table  # noqa: E402
 
 from estimation_nodes.params.fusion import fusion_config  # noqa: E402
 from estimation_nodes.tools.fusion import offline  # noqa: E402
 from estimation_nodes.tools.importers.utias import UtiasRun, read_run  # noqa: E402
 
-DATASET = Path(__file__).resolve().parents[2] / "shared" / "data" / "utias" / \
-    "MRCLAM_Dataset7"
+DATASET = SHARED_DATA / "utias" / "MRCLAM_Dataset7"
 #: Window lengths (s) of the heading's fit: 5 s to about a third of a run.
 HEADING_WINDOWS = (5.0, 10.0, 20.0, 40.0, 80.0, 160.0, 320.0)
 #: Window length (s) of the position's fit: short, where the heading's error adds little.

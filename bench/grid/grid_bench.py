@@ -31,10 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import REPO, table  # noqa: E402
 
 from estimation_nodes.core.grid import likelihood_field  # noqa: E402
 from estimation_nodes.core.grid.laser import correct_scan  # noqa: E402
@@ -117,7 +115,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeats", type=int, default=5)
     args = parser.parse_args()
-    occupancy = maps.read_map_file(BENCH.parent / "maps" / "office.yaml")
+    occupancy = maps.read_map_file(REPO / "maps" / "office.yaml")
     model = likelihood_field.grid_model(occupancy, 0.1, 72, default_sensor_field(), 5_000_000)
     rng = np.random.default_rng(0)
     belief = rng.random(model.shape) * model.free[None]

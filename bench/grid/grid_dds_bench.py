@@ -22,16 +22,13 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
-from ros_env import confine_ros  # noqa: E402
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench, tests
+from bench.common import REPO, confine_ros, table  # noqa: E402
 
 from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
 from tests.support import resident_mib  # noqa: E402
 
-MAP = BENCH.parent / "maps" / "office.yaml"
+MAP = REPO / "maps" / "office.yaml"
 
 
 def main() -> None:
@@ -55,7 +52,7 @@ def main() -> None:
         [sys.executable, "-m", "estimation_nodes.nodes.grid_localizer", "--ros-args", "-p",
          f"map_file:={MAP}", "-p", "diagnostics_period:=0.2", "-p", "autostart:=true",
          "-p", "odometry_source:=topic", "--log-level", "warn"],
-        env=env, cwd=BENCH.parent)
+        env=env, cwd=REPO)
     rclpy.init()
     node = Node("grid_bench_driver")
     poses: list = []

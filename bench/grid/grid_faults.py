@@ -65,14 +65,11 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
 
-from real_buildings import chosen_logs, localizer, ns, resolve, scan_beams  # noqa: E402
-from real_logs import NEAR_M, NEAR_RAD, SURE, WRONG_M, WRONG_RAD  # noqa: E402
-from ros_env import confine_ros  # noqa: E402
-from timing import table  # noqa: E402
+from bench.common import confine_ros, table  # noqa: E402
+from bench.grid.real_buildings import chosen_logs, localizer, ns, resolve, scan_beams  # noqa: E402
+from bench.grid.real_logs import NEAR_M, NEAR_RAD, SURE, WRONG_M, WRONG_RAD  # noqa: E402
 
 from estimation_nodes.core.geometry import compose, relative  # noqa: E402
 from estimation_nodes.tools.importers import carmen  # noqa: E402

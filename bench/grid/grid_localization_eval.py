@@ -43,12 +43,10 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
 
-import building_map  # noqa: E402
-from timing import table  # noqa: E402
+from bench.common import REPO, table  # noqa: E402
+from bench.grid import building_map  # noqa: E402
 
 from estimation_nodes.core.grid.model import COMPILED_MIN_STATES, compiled_kernels  # noqa: E402
 from estimation_nodes.core.sim import planar  # noqa: E402
@@ -65,7 +63,7 @@ from estimation_nodes.params.specs import (  # noqa: E402
 RADIUS, ANGLE = 0.3, math.radians(10.0)
 #: Confidently wrong: at least this quality for a pose farther than this from the truth.
 CONFIDENT, WRONG_M, WRONG_RAD = 0.8, 0.5, math.radians(30.0)
-SHIPPED = BENCH.parent / "maps"
+SHIPPED = REPO / "maps"
 
 
 @dataclass(frozen=True)

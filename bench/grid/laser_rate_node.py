@@ -27,21 +27,10 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
-from real_buildings import LOGS, RANGE_MAX  # noqa: E402
-from real_log_node import (  # noqa: E402
-    Watcher,
-    end_run,
-    executable,
-    peak_mib,
-    pose_rows,
-    prepare,
-    wait_for_line,
-)
-from ros_env import confine_ros  # noqa: E402
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import confine_ros, end_run, executable, table, wait_for_line  # noqa: E402
+from bench.grid.real_buildings import LOGS, RANGE_MAX  # noqa: E402
+from bench.grid.real_log_node import Watcher, peak_mib, pose_rows, prepare  # noqa: E402
 
 from estimation_nodes.tools.demo.graph_runtime import stop_process  # noqa: E402
 from estimation_nodes.tools.importers import carmen  # noqa: E402

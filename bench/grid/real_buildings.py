@@ -44,12 +44,10 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
 
-import amcl_baseline  # noqa: E402
-from timing import table  # noqa: E402
+from bench.common import SHARED_DATA, table  # noqa: E402
+from bench.grid import amcl_baseline  # noqa: E402
 
 from estimation_nodes.core.grid.model import COMPILED_MIN_STATES, compiled_kernels  # noqa: E402
 from estimation_nodes.core.grid.likelihood_field import grid_model  # noqa: E402
@@ -58,7 +56,7 @@ from estimation_nodes.params.grid import build_grid_localizer_settings  # noqa: 
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults  # noqa: E402
 from estimation_nodes.tools.importers import carmen  # noqa: E402
 
-DATA = BENCH.parent.parent / "shared" / "data" / "carmen"
+DATA = SHARED_DATA / "carmen"
 LOGS = {"intel": DATA / "intel-corrected.log.gz", "aces": DATA / "aces-corrected.log.gz"}
 MAP_RESOLUTION = 0.05
 #: Readings at or beyond this are no return in both logs (their maxima: 81.83, 50.0 m).

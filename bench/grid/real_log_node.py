@@ -46,10 +46,16 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
-from real_buildings import (  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import (  # noqa: E402
+    RunRecorder,
+    confine_ros,
+    end_run,
+    executable,
+    table,
+    wait_for_line,
+)
+from bench.grid.real_buildings import (  # noqa: E402
     LOGS,
     NEAR_M,
     NEAR_RAD,
@@ -57,16 +63,9 @@ from real_buildings import (  # noqa: E402
     PRIOR_SIGMA_RAD,
     RANGE_MAX,
 )
-from ros_env import confine_ros  # noqa: E402
-from run_recorder import RunRecorder  # noqa: E402
-from timing import table  # noqa: E402
 
 from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
 from estimation_nodes.tools.importers import carmen  # noqa: E402
-
-
-def executable(name: str) -> str:
-    return str(Path(sys.executable).parent / name)
 
 
 #: --tf: the laser this far (m) ahead of base_link in the imported tree.
@@ -379,28 +378,6 @@ def draw(log, watcher: Watcher, map_yaml: Path, output: Path, name: str) -> None
     figure.savefig(output)
     plt.close(figure)
     print(f"real_log_node: picture written to {output}")
-
-
-def end_run(play: subprocess.Popen | None, localizer: subprocess.Popen, node) -> None:
-    """Stop the play (if it still runs) and the node, each by its pid; rclpy shut down."""
-    import rclpy
-
-    if play is not None and play.poll() is None:
-        stop_process(play)
-    stop_process(localizer)
-    node.destroy_node()
-    rclpy.try_shutdown()
-
-
-def wait_for_line(process: subprocess.Popen, output: Path, text: str,
-                  timeout: float) -> bool:
-    """Whether ``process`` wrote ``text`` to ``output`` (its log) within ``timeout``."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and process.poll() is None:
-        if text in output.read_text():
-            return True
-        time.sleep(0.1)
-    return False
 
 
 def pose_rows(poses: dict, truths: dict, truth_name: str) -> list[list[str]]:

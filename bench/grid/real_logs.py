@@ -29,13 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
 
-import amcl_baseline  # noqa: E402
-from real_buildings import amcl_child, chosen_logs, grid_child  # noqa: E402
-from timing import table  # noqa: E402
+from bench.common import table  # noqa: E402
+from bench.grid import amcl_baseline  # noqa: E402
+from bench.grid.real_buildings import amcl_child, chosen_logs, grid_child  # noqa: E402
 
 from estimation_nodes.params.specs import GRID_LOCALIZER_SPECS, spec_defaults  # noqa: E402
 

@@ -22,11 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
-from real_buildings import RANGE_MAX, beam_angles, building_map, resolve  # noqa: E402
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import table  # noqa: E402
+from bench.grid.real_buildings import RANGE_MAX, beam_angles, building_map, resolve  # noqa: E402
 
 from estimation_nodes.core.grid.likelihood_field import grid_model  # noqa: E402
 from estimation_nodes.core.grid.scan_fit import fitted_pose  # noqa: E402

@@ -23,11 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
 
-from real_buildings import (  # noqa: E402
+from bench.common import table  # noqa: E402
+from bench.grid.real_buildings import (  # noqa: E402
     LOGS,
     PRIOR_SIGMA_M,
     PRIOR_SIGMA_RAD,
@@ -35,7 +34,6 @@ from real_buildings import (  # noqa: E402
     beam_angles,
     building_map,
 )
-from timing import table  # noqa: E402
 
 from estimation_nodes.core.grid.model import COMPILED_MIN_STATES, compiled_kernels  # noqa: E402
 from estimation_nodes.core.grid.likelihood_field import grid_model  # noqa: E402

@@ -40,13 +40,17 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-from ekf_real import DATASET, PARAMS, file_figures, run_filter, score  # noqa: E402
-from real_log_node import end_run, executable, wait_for_line  # noqa: E402
-from ros_env import confine_ros  # noqa: E402
-from run_recorder import RunRecorder  # noqa: E402
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import (  # noqa: E402
+    RELAY_NODE,
+    RunRecorder,
+    confine_ros,
+    end_run,
+    executable,
+    table,
+    wait_for_line,
+)
+from bench.landmarks.ekf_real import DATASET, PARAMS, file_figures, run_filter, score  # noqa: E402
 
 from estimation_nodes.params.landmarks import landmark_model  # noqa: E402
 from estimation_nodes.nodes.qos import latched_qos  # noqa: E402
@@ -250,7 +254,7 @@ def run_latency(args: argparse.Namespace, work: Path) -> None:
     rows, p99 = [], {}
     for target in ("relay", "ekf_localizer"):
         if target == "relay":
-            process = subprocess.Popen([sys.executable, str(BENCH / "relay_node.py")],
+            process = subprocess.Popen([sys.executable, str(RELAY_NODE)],
                                        env=env, stdout=(work / "relay.log").open("w"),
                                        stderr=subprocess.STDOUT)
         else:

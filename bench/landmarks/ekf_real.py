@@ -32,21 +32,20 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import REPO, SHARED_DATA, table  # noqa: E402
 
 from estimation_nodes.core.kalman import landmarks as lm  # noqa: E402
 from estimation_nodes.core.kalman.landmarks import LandmarkLocalization, Observation  # noqa: E402
-from utias_calibration import calibrate  # noqa: E402
+from bench.landmarks.utias_calibration import calibrate  # noqa: E402
 
 from estimation_nodes.params.landmarks import default_landmark_model, landmark_model  # noqa: E402
 from estimation_nodes.params.param_files import read_node_parameters  # noqa: E402
 from estimation_nodes.params.specs import LANDMARK_MODEL_SPECS, spec_defaults  # noqa: E402
 from estimation_nodes.tools.importers.utias import read_run  # noqa: E402
 
-DATASET = BENCH.parents[1] / "shared" / "data" / "utias" / "MRCLAM_Dataset7"
-PARAMS = BENCH.parent / "msgs_config" / "robots" / "utias_mrclam.yaml"
+DATASET = SHARED_DATA / "utias" / "MRCLAM_Dataset7"
+PARAMS = REPO / "msgs_config" / "robots" / "utias_mrclam.yaml"
 #: The covariance every run starts with (it starts at the truth's first pose).
 INITIAL_COVARIANCE = np.diag([0.01, 0.01, 0.01])
 #: Truth samples scored per second (Vicon gives about 60).

@@ -34,10 +34,12 @@ from pathlib import Path
 import numpy as np
 from scipy.optimize import least_squares, nnls
 
-from estimation_nodes.tools.importers.utias import UtiasRun, read_run
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import SHARED_DATA  # noqa: E402
 
-DATASET = Path(__file__).resolve().parents[2] / "shared" / "data" / "utias" / \
-    "MRCLAM_Dataset7"
+from estimation_nodes.tools.importers.utias import UtiasRun, read_run  # noqa: E402
+
+DATASET = SHARED_DATA / "utias" / "MRCLAM_Dataset7"
 #: Seconds over which the odometry's errors are fitted: the order of the time a
 #: robot goes without seeing a landmark, where the filter lives on odometry alone.
 WINDOW_S = 5.0

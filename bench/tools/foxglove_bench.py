@@ -43,11 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
-BENCH = Path(__file__).resolve().parent
-sys.path.insert(0, str(BENCH))
-sys.path.insert(1, str(BENCH.parent))
-from ros_env import confine_ros  # noqa: E402
-from timing import compare, format_seconds, table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench, tests
+from bench.common import compare, confine_ros, format_seconds, table  # noqa: E402
 
 from estimation_nodes.params import topics  # noqa: E402
 from tests.foxglove_client import FoxgloveClient  # noqa: E402

@@ -24,20 +24,14 @@ import time
 from collections import Counter
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ros_env import confine_ros  # noqa: E402
-from timing import table  # noqa: E402
+sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
+from bench.common import confine_ros, executable, table  # noqa: E402
 
 SCENARIOS = ("grid_corridor", "grid_localization", "localization", "tracking_2d", "landmarks")
 #: A run takes up to a minute and a half of robot time plus start-up; a hung one ends here.
 DEMO_TIMEOUT_S = 900
 REPLAY_TIMEOUT_S = 600
 VERDICT = re.compile(r"^online vs offline to \S+: (EQUAL|DIFFERENT.*)$", re.M)
-
-
-def executable(name: str) -> str:
-    """The console script beside this interpreter (the venv's)."""
-    return str(Path(sys.executable).parent / name)
 
 
 def start_load(count: int) -> list[subprocess.Popen]:
