@@ -1,6 +1,6 @@
 """Core filter steps against filterpy 2.0 and a floor of plain numpy passes.
 
-    python bench/core_bench.py [--quick]
+    python bench/core/core_bench.py [--quick]
 
 Histogram: one step as the estimator runs it (predict with u = 1, then
 correct in place) against filterpy.discrete_bayes.predict + update on the

@@ -1,6 +1,6 @@
 """Long seeded runs of the core filters, checking their numerical health at every step.
 
-    python bench/numerical_health.py --steps 1000000
+    python bench/core/numerical_health.py --steps 1000000
 
 Histogram: the book's world, sensor and kernel, random moves in [-3, 3] and
 observations drawn from the sensor model at a simulated true position; the

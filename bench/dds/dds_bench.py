@@ -1,6 +1,6 @@
 """Latency and throughput through DDS: the estimator against a bare rclpy relay.
 
-    python bench/dds_bench.py [--events 3000] [--rounds 5] [--pause-ms 2] [--pin]
+    python bench/dds/dds_bench.py [--events 3000] [--rounds 5] [--pause-ms 2] [--pin]
 
 A driver node (this process) publishes ``tile_observation`` and waits for
 the answer: the estimator's corrected ``belief`` (N = 5, the book's world),

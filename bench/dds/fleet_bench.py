@@ -1,6 +1,6 @@
 """How many robots one machine carries: K namespaces, each its estimator, sensor and commander.
 
-    python bench/fleet_bench.py [--robots 1 2 4 8 16] [--late-ms 250]
+    python bench/dds/fleet_bench.py [--robots 1 2 4 8 16] [--late-ms 250]
 
 Each robot runs the default scenario (localization: 40 steps at 4 Hz) in a
 namespace of its own, all on this machine. An observer in this process

@@ -1,6 +1,6 @@
 """A large world end to end: full steps per second and the estimator's memory.
 
-    python bench/large_world_bench.py [--cells 1000000] [--steps 30]
+    python bench/dds/large_world_bench.py [--cells 1000000] [--steps 30]
 
 The estimator runs as its own process on a world of N cells read from a
 world_file (seeded random dark and bright). A driver here sends a

@@ -1,6 +1,6 @@
 """ekf_node / ukf_node as a process: reading published -> odometry/filtered received.
 
-    python bench/fusion_node.py latency [--bag test1.bag|test2.bag] [--filter ekf|ukf]
+    python bench/fusion/fusion_node.py latency [--bag test1.bag|test2.bag] [--filter ekf|ukf]
         [--seconds 30] [--rounds 2]
 
 The peer's bag's odometry and IMU messages (../shared/data/robot_localization; test1.bag:
@@ -41,7 +41,7 @@ from estimation_nodes.params.fusion import fusion_config, parameters_of_file  # 
 from estimation_nodes.tools.demo.graph_runtime import spin_until, stop_process  # noqa: E402
 from estimation_nodes.tools.recording import bags  # noqa: E402
 
-#: This bench's ROS domain (bench/ros_env.py).
+#: This bench's ROS domain (bench/common.py).
 DOMAIN = 92
 
 

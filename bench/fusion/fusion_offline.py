@@ -1,6 +1,6 @@
 """robot_localization's bags through estimation_fuse: seconds per run and times real time.
 
-    python bench/fusion_offline.py [--repeats N] [--quick]
+    python bench/fusion/fusion_offline.py [--repeats N] [--quick]
 
 For each of the peer's bag tests (test1.bag, the Husky's 395 s; test2.bag, the Jackal's
 61 s; ../shared/data/robot_localization) and each filter (ekf, ukf), with the peer's

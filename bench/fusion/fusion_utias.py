@@ -1,6 +1,6 @@
 """ekf_node's filter on the UTIAS robots' odometry alone: does its covariance hold the truth?
 
-    python bench/fusion_utias.py [--dataset DIR] [--fit-robot 1] [--robots 1 2 3]
+    python bench/fusion/fusion_utias.py [--dataset DIR] [--fit-robot 1] [--robots 1 2 3]
 
 Each robot's commands (t, v, w at about 65 Hz; ../shared/data/utias, dataset 7) are fed
 as a twist input (vx = v, vy = 0: the robot does not slide; vyaw = w) through the fusion

@@ -1,6 +1,6 @@
 """A seeded building the package does not ship, for the localization benchmark.
 
-    python bench/building_map.py OUT_DIR [--seed 11]
+    python bench/grid/building_map.py OUT_DIR [--seed 11]
 
 30 m x 20 m: two corridors across and one along, rooms between them whose
 widths are drawn from a few sizes (so several rooms look alike from inside),

@@ -1,6 +1,6 @@
 """Grid localization: one prediction and one correction on the benchmark's grid, three ways.
 
-    python bench/grid_bench.py [--repeats 5]
+    python bench/grid/grid_bench.py [--repeats 5]
 
 The office map (maps/office.yaml, 20 m x 20 m) at 0.1 m and 5 degrees: 200 x
 200 x 72 = 2.88 million states; a scan of 60 beams; a motion of 0.25 m with a

@@ -1,6 +1,6 @@
 """Grid localization through DDS: scan -> pose, one update after another, on the benchmark's grid.
 
-    python bench/grid_dds_bench.py [--updates 40]
+    python bench/grid/grid_dds_bench.py [--updates 40]
 
 grid_localizer runs as its own process on the office map (0.1 m, 72 headings:
 2.88 million states). A driver here moves a simulated robot (core/planar.py)

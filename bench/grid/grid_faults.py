@@ -1,6 +1,6 @@
 """Faults on real logs: is the grid localizer ever confidently wrong?
 
-    python bench/grid_faults.py [--log intel|aces ...] [--faults NAME ...] [--trials 20]
+    python bench/grid/grid_faults.py [--log intel|aces ...] [--faults NAME ...] [--trials 20]
         [--seed 38] [--details] [--node [--scan-rate 5]]
 
 The localizer of real_buildings.py (grid_localizer's defaults, the map from the log's
@@ -97,7 +97,7 @@ FAULTS = {
     "clutter_5s": (5.0, "scans"), "no_scans_3s": (3.0, "scans"),
 }
 ALL = ["none", *FAULTS, "kidnap"]
-#: --node: the ROS domain of the localizer, the play and the bench's node (ros_env.py).
+#: --node: the ROS domain of the localizer, the play and the bench's node (common.py).
 NODE_DOMAIN = 95
 
 

@@ -1,8 +1,8 @@
 """Global localization and kidnapping, over seeds, without DDS; how often the localizer is
 confidently wrong.
 
-    python bench/grid_localization_eval.py [--seeds 20] [--seconds 60]
-    python bench/grid_localization_eval.py --map MAP.yaml [--map ...] [--building SEED ...]
+    python bench/grid/grid_localization_eval.py [--seeds 20] [--seconds 60]
+    python bench/grid/grid_localization_eval.py --map MAP.yaml [--map ...] [--building SEED ...]
         [--laser-range 12] [--resolution 0.1] [--heading-bins 72] [--runs global]
         [--independent-beams K ...]
 
@@ -25,7 +25,7 @@ By default the shipped maps: the corridor with a 4 m laser (its doorways
 repeat every 2.2 m, so the belief stays multi-modal until the robot sees its
 alcove or an end) and the office with a 12 m one. ``--map`` takes any
 map_server map instead and ``--building SEED`` a building drawn from a seed
-(bench/building_map.py): maps no parameter was tuned on. ``--independent-beams``
+(bench/grid/building_map.py): maps no parameter was tuned on. ``--independent-beams``
 runs the localizer with that ``laser_independent_beams`` instead of its default,
 a row for each value given.
 """
@@ -170,7 +170,7 @@ def main() -> None:
     parser.add_argument("--map", type=Path, action="append", default=[],
                         help="a map_server map to run on instead of the shipped ones")
     parser.add_argument("--building", type=int, action="append", default=[],
-                        help="a building drawn from this seed (bench/building_map.py)")
+                        help="a building drawn from this seed (bench/grid/building_map.py)")
     parser.add_argument("--laser-range", type=float, default=12.0, help="for --map, --building")
     parser.add_argument("--resolution", type=float, default=0.1, help="for --map, --building")
     parser.add_argument("--heading-bins", type=int, default=72, help="for --map, --building")

@@ -1,11 +1,11 @@
 """A real building's map, a laser at a steady 10 Hz, the running grid_localizer: how many
 scans it answers.
 
-    python bench/laser_rate_node.py [--log intel|aces|PATH] [--rate-hz 10] [--seconds 60]
+    python bench/grid/laser_rate_node.py [--log intel|aces|PATH] [--rate-hz 10] [--seconds 60]
                                     [--every-scan]
 
 The corrected CARMEN logs keep a scan every 3 s or so; played faster they come in
-bursts (bench/real_log_node.py). Here the scans are a laser's: ``planar_robot`` drives
+bursts (bench/grid/real_log_node.py). Here the scans are a laser's: ``planar_robot`` drives
 a simulated robot through the map ``estimation_map`` makes from the log (0.05 m), from
 the log's first corrected pose, and casts a scan at every step, ``--rate-hz`` steps a
 second, each stamped with its ``scan_time``, so the localizer counts exactly the scans

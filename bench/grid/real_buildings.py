@@ -1,6 +1,6 @@
 """The grid localizer on real buildings: time per update, memory and accuracy on real logs.
 
-    python bench/real_buildings.py [--log intel|aces|PATH ...] [--scans N]
+    python bench/grid/real_buildings.py [--log intel|aces|PATH ...] [--scans N]
         [--resolution 0.1] [--heading-bins 72] [--belief-floor F ...] [--profile]
         [--no-amcl]
 

@@ -1,6 +1,6 @@
 """A real log through the running grid_localizer, played at a laser's rate.
 
-    python bench/real_log_node.py [--log intel|aces|PATH] [--scan-rate 10]
+    python bench/grid/real_log_node.py [--log intel|aces|PATH] [--scan-rate 10]
         [--resolution 0.1] [--heading-bins 72] [--max-odom-jump 5] [--seconds S]
         [--picture FILE.png] [--keep DIR] [--record FILE.mcap] [--tf]
 

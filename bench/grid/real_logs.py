@@ -1,14 +1,14 @@
 """The score on real logs, side by side: our grid localizer and Nav2's AMCL, tracking and
 global localization.
 
-    python bench/real_logs.py [--log intel|aces|PATH ...] [--scans N]
+    python bench/grid/real_logs.py [--log intel|aces|PATH ...] [--scans N]
 
 For each CARMEN log (../shared/data/carmen) the runs of real_buildings.py (the map from
 the corrected poses, the raw odometry, the scans; the core, no DDS), twice: tracking
 (the first corrected pose given, 0.3 m and 10 degrees) and global (no pose: our belief
 uniform over the free cells; AMCL's particles spread over the map from its centre, the
 nearest the bindings come to Nav2's global localization). The localizer runs with
-grid_localizer's defaults; AMCL with Nav2's (bench/amcl_baseline.py), given exactly the
+grid_localizer's defaults; AMCL with Nav2's (bench/grid/amcl_baseline.py), given exactly the
 scans ours took. Per run:
 
 - converged after: the updates before the first SETTLED updates in a row all within

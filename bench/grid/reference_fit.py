@@ -1,7 +1,7 @@
 """How well a log's corrected poses agree with the map made from them: the floor of a
 localizer's score against them.
 
-    python bench/reference_fit.py [--log intel|aces|PATH ...]
+    python bench/grid/reference_fit.py [--log intel|aces|PATH ...]
 
 The real logs' truth is their SLAM's corrected poses, and the localizer is given a
 map made from those same poses (real_buildings.py). Where a corrected pose is off,

@@ -1,6 +1,6 @@
 """The windowed grid filter against the dense one at full size, on a real log.
 
-    python bench/window_vs_dense.py [--log intel|aces|PATH] [--scans 40]
+    python bench/grid/window_vs_dense.py [--log intel|aces|PATH] [--scans 40]
         [--belief-floor F ...]
 
 The localizer of real_buildings.py (the same map, odometry, scans and prior), run

@@ -1,16 +1,16 @@
 """The landmark filters through the running ekf_localizer: a UTIAS robot played into it,
 and its event -> pose latency at a camera's and an odometry's rates.
 
-    python bench/ekf_node.py run [--robot 1] [--filter ekf|ukf] [--rate 1] [--seconds S]
+    python bench/landmarks/ekf_node.py run [--robot 1] [--filter ekf|ukf] [--rate 1] [--seconds S]
         [--record FILE.mcap]
-    python bench/ekf_node.py latency [--filter ekf|ukf] [--seconds 30]
+    python bench/landmarks/ekf_node.py latency [--filter ekf|ukf] [--seconds 30]
 
 ``run``: what a user does with the dataset, through the real executables.
 ``estimation_import utias`` makes the recording and the landmarks file,
 ``ekf_localizer`` runs as its own process with msgs_config/robots/utias_mrclam.yaml
 (started at Vicon's pose at the first odometry message), and ``estimation_play``
 plays ``/odom`` and ``/landmark_observations`` into it at ``--rate`` times real time.
-Printed: the published poses scored against Vicon as bench/ekf_real.py scores the
+Printed: the published poses scored against Vicon as bench/landmarks/ekf_real.py scores the
 core's, and the largest difference from the core filter run offline on the same
 events, their observations read as the node reads them (float32 coordinates). With
 ``--record`` the run is also recorded (the odometry and frames the node heard, its poses,

@@ -9,7 +9,7 @@ the same data, and a floor: the truth itself at every camera frame, carried to t
 next by odometry (between frames no filter knows more than the pose at the last).
 
 The filters take the parameters ekf_localizer takes from ``--params`` (by default
-msgs_config/robots/utias_mrclam.yaml, whose figures bench/utias_calibration.py derives
+msgs_config/robots/utias_mrclam.yaml, whose figures bench/landmarks/utias_calibration.py derives
 from robots 1 to 3 pooled). With ``--cross-validate`` each robot is run with the
 figures derived from the other robots alone (the file's other settings kept): what a
 robot the figures never saw gets (the spreads, range_scale_std and sensor_pose_std, then
@@ -17,7 +17,7 @@ come from two robots' calibrations; with only two robots given, from the file).
 ``--truth-shift S`` scores against Vicon's poses S seconds later than their stamps (a
 question about the clocks, not a filter's figure).
 
-    python bench/ekf_real.py [--dataset DIR] [--robots 1 2 3] [--params FILE]
+    python bench/landmarks/ekf_real.py [--dataset DIR] [--robots 1 2 3] [--params FILE]
                              [--cross-validate] [--truth-shift S]
 """
 

@@ -18,9 +18,9 @@ tuned to one. The ground truth (Vicon) is what each figure is measured against:
   variance of a step's distance and turn (the filter's noise.* terms), fitted over
   windows of WINDOW_S seconds.
 
-    python bench/utias_calibration.py [--dataset DIR] [--robots 1 2 3]
+    python bench/landmarks/utias_calibration.py [--dataset DIR] [--robots 1 2 3]
 
-bench/ekf_real.py --cross-validate calls ``calibrate`` with each robot left out.
+bench/landmarks/ekf_real.py --cross-validate calls ``calibrate`` with each robot left out.
 """
 
 from __future__ import annotations

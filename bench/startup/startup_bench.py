@@ -1,6 +1,6 @@
 """Start-up and discovery of the estimator, with and without the shipped Fast DDS profile.
 
-    python bench/startup_bench.py [--runs 10]
+    python bench/startup/startup_bench.py [--runs 10]
 
 For each run a fresh estimator process is started while this process is
 already running a driver node. Measured from the moment the process is
@@ -9,7 +9,7 @@ subscription (discovery, driver side), when the driver's ``belief_predicted``
 subscription sees the estimator's publisher (the "already running
 subscriber discovers it"), and when the first output arrives (the driver
 publishes a command every 10 ms until one is answered). Alternating runs use
-the default Fast DDS settings and bench/fastdds_discovery.xml (faster initial
+the default Fast DDS settings and bench/startup/fastdds_discovery.xml (faster initial
 announcements, set through FASTRTPS_DEFAULT_PROFILES_FILE for both sides),
 so both see the same machine.
 """
@@ -93,7 +93,7 @@ def main() -> None:
         for setting in ("default", "profile"):
             env = dict(os.environ)
             env.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
-            env.setdefault("ROS_DOMAIN_ID", "85")   # outside the tests' 1..80 (ros_env.py)
+            env.setdefault("ROS_DOMAIN_ID", "85")   # outside the tests' 1..80 (bench/common.py)
             env.pop("FASTRTPS_DEFAULT_PROFILES_FILE", None)
             if setting == "profile":
                 env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(PROFILE)

@@ -1,6 +1,6 @@
 """What a Foxglove live view and its clients cost a run of the demo.
 
-    python bench/foxglove_bench.py [--runs 3] [--cells 100000]
+    python bench/tools/foxglove_bench.py [--runs 3] [--cells 100000]
 
 Each run is ``estimation_demo --quiet --record run.mcap`` in one of four
 settings, interleaved run by run so a noisy machine slows each alike: no live

@@ -1,6 +1,6 @@
 """Recorded runs replayed with a core kept busy: issue 35's acceptance, as a new user runs it.
 
-    .venv/bin/python bench/replay_under_load.py [--runs 10] [--load 1] [SCENARIO ...]
+    .venv/bin/python bench/tools/replay_under_load.py [--runs 10] [--load 1] [SCENARIO ...]
     make replay-under-load REPLAY_ARGS="--runs 2"
 
 For each scenario (by default every recorded kind of run: grid_corridor,

@@ -192,7 +192,7 @@ def lattice_cells(model: GridModel, phase: int) -> np.ndarray:
     robot is scored from a lattice cell within KIDNAP_STEP cells of it every update,
     and from the nearest one every KIDNAP_PHASES updates, at 1 / KIDNAP_PHASES of the
     cost of scoring the whole lattice with every scan (half of a tracked update's time
-    on a building the size of the Intel lab's, bench/real_buildings.py --profile).
+    on a building the size of the Intel lab's, bench/grid/real_buildings.py --profile).
     """
     free = model.free[::KIDNAP_STEP, ::KIDNAP_STEP]
     rows = np.arange(free.shape[0])[:, None]
