@@ -16,7 +16,7 @@ belief says).
 Every public function checks its arguments and raises ``InvalidInputError``
 (core/errors.py) naming the one that is wrong: a belief of another shape than
 the model's or with values outside [0, 1], a number that is NaN or infinite,
-a scan with a range that is no reading (see ``check_scan``). Results are finite.
+a scan with a range that is no reading (see ``laser.check_scan``). Results are finite.
 The checks of a belief are two numpy reductions; the running localizer
 (localization.py) checks its new inputs once and calls the unchecked steps
 (underscored, beside each public one) on the belief it holds.
@@ -129,6 +129,9 @@ class GridModel:
         return x, y
 
 
+# --- argument checks -----------------------------------------------------------------------
+
+
 #: The farthest a laser may sit from the robot's centre (m): further is a unit mistake.
 MAX_MOUNTING_OFFSET = 100.0
 
@@ -194,6 +197,9 @@ def _any_belief(belief: Any, ndim: int | None = 3) -> FloatArray:
         raise InputSizeError(f"belief: expected a {ndim}-dimensional array, got shape "
                              f"{array.shape}")
     return check_probabilities("belief", array, array.shape)
+
+
+# --- the compiled kernels or numpy's, and angles -------------------------------------------
 
 
 def _compiled_kernels() -> ModuleType | None:

@@ -241,6 +241,9 @@ def _normalized(belief: FloatArray, total: float) -> FloatArray:
     return belief
 
 
+# --- the prediction's pieces: fractional shifts, Gaussian blurs ----------------------------
+
+
 def _shift_bilinear(layer: FloatArray, shift_cols: float, shift_rows: float) -> FloatArray:
     """``layer`` moved by a fractional number of columns and rows: each cell's mass split
     over the four nearest target cells by bilinear weights; what leaves the grid is lost."""
