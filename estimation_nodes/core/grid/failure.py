@@ -42,7 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid.model import GridModel
+from estimation_nodes.core.grid.motion import OdometryNoise, _motion_noise
 from estimation_nodes.core.validation import FloatArray
 
 Pose = tuple[float, float, float]
@@ -63,7 +64,7 @@ def judged(doubt: float, kidnapped: float, jumped: bool) -> float:
     return new + (1.0 - new) * doubt * (1.0 - RECOVERY)
 
 
-def jumped(model: grid.GridModel, noise: grid.OdometryNoise, before: Pose,
+def jumped(model: GridModel, noise: OdometryNoise, before: Pose,
            delta: tuple[float, float, float], after: Pose) -> bool:
     """Whether ``after`` is beyond the prediction's reach from ``before`` moved by
     ``delta`` (rot1, trans, rot2): further than REACH_SIGMAS of the motion noise and
@@ -72,7 +73,7 @@ def jumped(model: grid.GridModel, noise: grid.OdometryNoise, before: Pose,
     x = before[0] + trans * math.cos(before[2] + rot1)
     y = before[1] + trans * math.sin(before[2] + rot1)
     yaw = before[2] + rot1 + rot2
-    sigma_cells, sigma_bins = grid._motion_noise(delta, noise, model)
+    sigma_cells, sigma_bins = _motion_noise(delta, noise, model)
     reach_m = (REACH_SIGMAS * sigma_cells + REACH_CELLS) * model.resolution
     reach_rad = (REACH_SIGMAS * sigma_bins + REACH_CELLS) * model.bin_width
     return bool(math.hypot(after[0] - x, after[1] - y) > reach_m
@@ -89,7 +90,7 @@ class Spread:
     headings: FloatArray
 
 
-def spread_of(model: grid.GridModel) -> Spread:
+def spread_of(model: GridModel) -> Spread:
     xs, ys = model.cell_centres()
     rows, cols = np.nonzero(model.free)
     points = np.stack([xs[cols], ys[rows]])
