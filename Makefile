@@ -50,17 +50,17 @@ test-under-load: $(STAMP)
 
 # Issue 35's acceptance: fresh recorded demo runs of each recorded kind, each replayed, with
 # one core kept busy by a process the script starts and ends by its pid; prints per scenario
-# how many replayed EQUAL (bench/replay_under_load.py; REPLAY_ARGS="--runs 2" for a quick one).
+# how many replayed EQUAL (bench/tools/replay_under_load.py; REPLAY_ARGS="--runs 2" for a quick one).
 replay-under-load: $(STAMP)
-	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/python bench/replay_under_load.py $(REPLAY_ARGS)
+	AMENT_PREFIX_PATH=$(abspath $(VENV)) $(BIN)/python bench/tools/replay_under_load.py $(REPLAY_ARGS)
 
 # Benchmarks print tables of figures with ratios to references measured in the
 # same run (see bench/README.md); they assert nothing and take a few minutes.
 bench: $(STAMP)
-	$(BIN)/python bench/core_bench.py
-	$(BIN)/python bench/dds_bench.py
-	$(BIN)/python bench/large_world_bench.py
-	$(BIN)/python bench/startup_bench.py
+	$(BIN)/python bench/core/core_bench.py
+	$(BIN)/python bench/dds/dds_bench.py
+	$(BIN)/python bench/dds/large_world_bench.py
+	$(BIN)/python bench/startup/startup_bench.py
 
 clean:
 	rm -rf $(VENV) build *.egg-info

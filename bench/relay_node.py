@@ -4,10 +4,10 @@ It subscribes to ``tile_observation`` and publishes the same String on
 ``relay_out`` (and ``kalman_measurement`` to ``relay_vector_out``, for the
 matrix filter's path), with the estimator's own QoS on both sides, so a
 benchmark can compare the estimator with the least any rclpy node in its place
-could do. For ekf_localizer's place (bench/ekf_node.py latency): every ``odom`` and
+could do. For ekf_localizer's place (bench/landmarks/ekf_node.py latency): every ``odom`` and
 ``landmark_observations`` message is answered on ``pose`` by an empty
 PoseWithCovarianceStamped with the event's header, the localizer's QoS on both sides.
-For ekf_node's place (bench/fusion_node.py latency, ``relay_node.py fusion TOPIC:KIND
+For ekf_node's place (bench/fusion/fusion_node.py latency, ``relay_node.py fusion TOPIC:KIND
 ...``): every message on each input (KIND odom or imu) is answered on
 ``odometry/filtered`` by an empty Odometry with the message's header, ekf_node's QoS on
 both sides.

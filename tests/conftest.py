@@ -28,7 +28,7 @@ TEST_DOMAINS = 80
 
 class _NextDomain:
     """domain_coordinator's selector, but moving on through 1..80 over the session (81 to
-    98 are the benchmarks', bench/ros_env.py; 99 the demo's, Makefile).
+    98 are the benchmarks', bench/common.py; 99 the demo's, Makefile).
 
     Its default selector starts from 1 on every call, so consecutive tests all
     got domain 1: a process or a sample that outlived its test could then reach

@@ -53,7 +53,7 @@ from std_srvs.srv import Empty, Trigger
 
 from estimation_nodes.core import errors
 from estimation_nodes.core.grid import failure
-from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid.model import GridModel
 from estimation_nodes.core.grid.localization import (ODOMETRY_HISTORY, GridLocalization,
                                                      OdometryStep)
 from estimation_nodes.core.transforms.buffer import (Extrapolation, LookupFailed,
@@ -222,7 +222,7 @@ class GridLocalizer(ManagedNode):
         return self._frames.transform_tolerance if self._frames.odometry_from_tf \
             else self._settings.odom_wait
 
-    def _start(self, model: grid.GridModel) -> None:
+    def _start(self, model: GridModel) -> None:
         self.localization = self._settings.localization(model)
         rows, cols = model.free.shape
         self.get_logger().info(

@@ -11,8 +11,9 @@ from typing import Any
 
 from estimation_nodes.core.grid.likelihood_field import SensorField, grid_model
 from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.core.grid.model import GridModel
+from estimation_nodes.core.grid.motion import OdometryNoise
 from estimation_nodes.core.grid.occupancy import OccupancyMap
-from estimation_nodes.core.grid.steps import GridModel, OdometryNoise
 from estimation_nodes.params.map_files import read_map_file
 from estimation_nodes.params.specs import GRID_MODEL_SPECS, UNSET, spec_defaults
 

@@ -1,5 +1,5 @@
-"""The landmark filter's settings (ekf_localizer, bench/ekf_real.py) from parameter values
-(LANDMARK_MODEL_SPECS)."""
+"""The landmark filter's settings (ekf_localizer, bench/landmarks/ekf_real.py) from parameter
+values (LANDMARK_MODEL_SPECS)."""
 
 from __future__ import annotations
 

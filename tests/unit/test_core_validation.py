@@ -29,6 +29,8 @@ from estimation_nodes.core import errors
 from estimation_nodes.core.grid import likelihood_field, occupancy
 from estimation_nodes.core.grid import steps as grid
 from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.core.grid.model import _compiled_kernels
+from estimation_nodes.core.grid.motion import _motion_noise
 from estimation_nodes.core.kalman import linear as kalman
 from estimation_nodes.core.kalman.filter import KalmanFilter
 from estimation_nodes.core.kalman.models import (
@@ -627,10 +629,10 @@ def kalman_filter_step(data, rng, kalman_filter, initial, step):
 def grid_path(request, monkeypatch):
     """Run the test with numpy's passes, then with the compiled kernels at every size."""
     if request.param == "compiled":
-        assert grid._compiled_kernels() is not None, "numba is a dependency; it must import"
-        monkeypatch.setattr(grid, "COMPILED_MIN_STATES", 1)
+        assert _compiled_kernels() is not None, "numba is a dependency; it must import"
+        monkeypatch.setattr("estimation_nodes.core.grid.model.COMPILED_MIN_STATES", 1)
     else:
-        monkeypatch.setattr(grid, "COMPILED_MIN_STATES", sys.maxsize)
+        monkeypatch.setattr("estimation_nodes.core.grid.model.COMPILED_MIN_STATES", sys.maxsize)
     return request.param
 
 
@@ -764,7 +766,7 @@ def test_grid_predict(grid_path, kind, data):
         assert np.all(predicted[:, ~model.free] == 0.0)
         numpy_path = grid.predict(belief, model, delta, noise, compiled=False)
         np.testing.assert_allclose(predicted, numpy_path, rtol=0, atol=1e-12)
-        sigma_cells, sigma_bins = grid._motion_noise(delta, noise, model)
+        sigma_cells, sigma_bins = _motion_noise(delta, noise, model)
         if max(sigma_cells, sigma_bins) < 4:      # taps few enough to visit one by one
             np.testing.assert_allclose(predicted, brute_force_predict(belief, model, delta, noise),
                                        rtol=0, atol=1e-12)

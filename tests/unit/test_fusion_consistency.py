@@ -1,26 +1,20 @@
 """ekf_node's filter on a real robot's odometry alone keeps the truth in its 95% ellipse as
 often as a consistent filter should (issue 34): the UTIAS robot 3's commands, with the
-noise figures bench/fusion_utias.py derives from robot 1's data (robot 3 is not fitted
+noise figures bench/fusion/fusion_utias.py derives from robot 1's data (robot 3 is not fitted
 on), its estimates against Vicon."""
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
 
-BENCH = Path(__file__).resolve().parents[2] / "bench"
 DATASET = Path(__file__).resolve().parents[3] / "shared" / "data" / "utias" / "MRCLAM_Dataset7"
 
 
 @pytest.mark.skipif(not DATASET.is_dir(), reason="the UTIAS dataset is not in ../shared/data")
 def test_on_odometry_alone_the_truth_stays_in_the_95_percent_ellipse_85_to_99_percent():
-    sys.path.insert(0, str(BENCH))
-    try:
-        from fusion_utias import consistency, fit
-    finally:
-        sys.path.pop(0)
+    from bench.fusion.fusion_utias import consistency, fit
     from estimation_nodes.tools.importers.utias import read_run
 
     result = consistency(read_run(DATASET, 3), fit(read_run(DATASET, 1)))

@@ -9,8 +9,9 @@ import pytest
 
 from estimation_nodes.core.geometry import compose
 from estimation_nodes.core.grid import failure
-from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid.laser import scan_log_likelihood
 from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.core.grid.motion import odometry_delta
 from estimation_nodes.core.sim import planar
 from estimation_nodes.params.grid import build_grid_localizer_settings, default_odometry_noise
 from estimation_nodes.params.map_files import read_map_file
@@ -56,7 +57,7 @@ def corridor_settings(**values):
 ])
 def test_a_mode_beyond_the_prediction_s_reach_jumped(after, jumps):
     model = corridor_settings().model
-    delta = grid.odometry_delta((0.0, 0.0, 0.0), (0.3, 0.0, 0.0))
+    delta = odometry_delta((0.0, 0.0, 0.0), (0.3, 0.0, 0.0))
     assert failure.jumped(model, default_odometry_noise(), (2.0, 1.6, 0.0), delta,
                           after) is jumps
 
@@ -85,9 +86,9 @@ def test_the_dense_filter_s_kidnap_share_is_its_posterior_probability():
     ranges, angles = corridor_scan((6.0, 1.6, 0.0))          # taken 2 m from the prior
     prior = localization.belief.copy()
     localization.update(ranges, angles, odometry=(0.0, 0.0, 0.0))
-    likelihood = np.exp(settings.independent_beams / ranges.size * grid.scan_log_likelihood(
+    likelihood = np.exp(settings.independent_beams / ranges.size * scan_log_likelihood(
         model, ranges, angles)) if ranges.size > settings.independent_beams else \
-        np.exp(grid.scan_log_likelihood(model, ranges, angles))
+        np.exp(scan_log_likelihood(model, ranges, angles))
     free_states = model.free.sum() * model.heading_bins
     share = 1e-3 / free_states * float(np.sum(likelihood * model.free))
     tracked = (1 - 1e-3) * float(np.sum(likelihood * prior))

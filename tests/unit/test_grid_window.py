@@ -5,9 +5,18 @@ import math
 import numpy as np
 import pytest
 
-from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.errors import ZeroEvidenceError
 from estimation_nodes.core.grid import window
+from estimation_nodes.core.grid.correction import correct
+from estimation_nodes.core.grid.laser import (
+    _scan_log_likelihood,
+    _scan_log_likelihood_strided,
+    scan_log_likelihood,
+)
 from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.core.grid.model import COMPILED_MIN_STATES, GridModel, compiled_kernels
+from estimation_nodes.core.grid.motion import _predict
+from estimation_nodes.core.grid.priors import gaussian_prior
 from estimation_nodes.params.grid import default_odometry_noise
 
 SECOND = 10**9
@@ -21,8 +30,8 @@ def room(rows, cols, bins=16, resolution=0.1):
     free[[0, -1], :] = free[:, [0, -1]] = False
     free[rng.integers(1, rows - 1, 12), rng.integers(1, cols - 1, 12)] = False
     log_field = np.where(free, math.log(0.05), math.log(2.0)) + 0.1 * rng.random((rows, cols))
-    return grid.GridModel(free=free, log_field=log_field, log_outside=math.log(0.01),
-                          resolution=resolution, origin=(-1.0, 2.0), heading_bins=bins)
+    return GridModel(free=free, log_field=log_field, log_outside=math.log(0.01),
+                     resolution=resolution, origin=(-1.0, 2.0), heading_bins=bins)
 
 
 def scan(count=12):
@@ -98,8 +107,8 @@ def test_the_grown_box_holds_everything_the_prediction_reaches():
         belief /= belief.sum()
         delta = (RNG.uniform(-3, 3), RNG.uniform(0, 0.6), RNG.uniform(-3, 3))
         try:
-            predicted = grid._predict(belief, model, delta, noise)
-        except grid.ZeroEvidenceError:
+            predicted = _predict(belief, model, delta, noise)
+        except ZeroEvidenceError:
             continue
         r0, r1, c0, c1 = window.grown_box(window.support_box(belief), model, delta, noise)
         outside = predicted.copy()
@@ -124,8 +133,8 @@ def test_the_kidnap_lattice_correction_is_bayes_rule_over_the_mixed_prior(phase)
     rows, columns = np.indices((15, 17))
     lattice[::2, ::2, ::2] = model.free[::2, ::2] & ((rows + columns) % 2 == phase)
     prior = (1 - share) * belief + share * lattice / lattice.sum()
-    expected, expected_evidence = grid.correct(
-        prior, weight * grid.scan_log_likelihood(model, ranges, angles))
+    expected, expected_evidence = correct(
+        prior, weight * scan_log_likelihood(model, ranges, angles))
     full = np.zeros(model.shape)
     r0, r1, c0, c1 = box
     full[:, r0:r1, c0:c1] = correction.parts[0]
@@ -156,8 +165,8 @@ def test_a_kidnapped_robot_is_found_on_the_lattice():
     j, i = int(np.argmin(abs(xs - truth[0]))), int(np.argmin(abs(ys - truth[1])))
     field = np.full(model.free.shape, math.log(0.01))
     field[i, j + 5] = math.log(50.0)        # only from the truth does a beam end here
-    model = grid.GridModel(model.free, field, math.log(0.01), model.resolution,
-                           model.origin, model.heading_bins)
+    model = GridModel(model.free, field, math.log(0.01), model.resolution,
+                      model.origin, model.heading_bins)
     loc.model = model
     ranges, angles = np.array([0.5]), np.array([0.0])
     loc.on_odometry((0.0, 0.0, 0.0), SECOND)
@@ -173,11 +182,11 @@ def test_a_kidnapped_robot_is_found_on_the_lattice():
 
 def test_the_compiled_lattice_scan_equals_numpys_and_the_dense_scan_on_the_lattice():
     model = room(260, 250)     # a lattice of 8 x 130 x 125 states: the compiled path
-    assert grid.compiled_kernels(8 * 130 * 125) is not None
+    assert compiled_kernels(8 * 130 * 125) is not None
     ranges, angles = scan(20)
-    compiled = grid._scan_log_likelihood_strided(model, ranges, angles, 2, compiled=True)
-    numpy_s = grid._scan_log_likelihood_strided(model, ranges, angles, 2, compiled=False)
-    dense = grid._scan_log_likelihood(model, ranges, angles)
+    compiled = _scan_log_likelihood_strided(model, ranges, angles, 2, compiled=True)
+    numpy_s = _scan_log_likelihood_strided(model, ranges, angles, 2, compiled=False)
+    dense = _scan_log_likelihood(model, ranges, angles)
     np.testing.assert_allclose(compiled, numpy_s, rtol=0, atol=1e-12)
     np.testing.assert_allclose(compiled, dense[::2, ::2, ::2] * model.free[::2, ::2],
                                rtol=0, atol=1e-12)
@@ -187,7 +196,7 @@ def test_the_windowed_steps_need_no_kernel_beyond_those_compiled_at_load():
     """A kernel compiled mid-run (a new argument layout) is where a Ctrl-C ends in a
     traceback (core/compiled_loader.py): the windowed update and its kidnap lattice use
     exactly the versions warm_up compiled."""
-    kernels = grid.compiled_kernels(grid.COMPILED_MIN_STATES)
+    kernels = compiled_kernels(COMPILED_MIN_STATES)
     model = room(300, 300, bins=32)
     loc = GridLocalization(model, default_odometry_noise(), 0.0, 0.0, 10.0,
                            kidnap_probability=1e-12, belief_floor=1e-9)
@@ -200,7 +209,7 @@ def test_the_windowed_steps_need_no_kernel_beyond_those_compiled_at_load():
         loc.on_odometry((0.1 * step, 0.0, 0.05 * step), (step + 1) * SECOND)
         loc.update(ranges, angles, (step + 1) * SECOND)
     # The window's compiled path ran: more states than COMPILED_MIN_STATES, not all.
-    assert grid.COMPILED_MIN_STATES < loc.window_states < model.free.size * 32 / 2
+    assert COMPILED_MIN_STATES < loc.window_states < model.free.size * 32 / 2
     assert {name: len(getattr(kernels, name).signatures) for name in compiled} == compiled
     # Whatever ran before in this process: no version for a strided ('A') array.
     assert not [sig for name in compiled for sig in getattr(kernels, name).signatures
@@ -211,8 +220,8 @@ def test_two_far_modes_are_two_windows_and_the_filter_stays_the_dense_one():
     model = room(120, 130)
     dense, windowed = tracked_pair(model, floor=1e-30)
     # Two hypotheses 8 m apart: one window around each, not the box of both.
-    belief = 0.6 * grid.gaussian_prior(model, 1.5, 4.0, 0.3, np.diag([0.01, 0.01, 0.01])) \
-        + 0.4 * grid.gaussian_prior(model, 9.5, 12.0, 2.0, np.diag([0.01, 0.01, 0.01]))
+    belief = 0.6 * gaussian_prior(model, 1.5, 4.0, 0.3, np.diag([0.01, 0.01, 0.01])) \
+        + 0.4 * gaussian_prior(model, 9.5, 12.0, 2.0, np.diag([0.01, 0.01, 0.01]))
     for loc in (dense, windowed):
         loc._hold(belief.copy())
     odometry = (0.0, 0.0, 0.0)

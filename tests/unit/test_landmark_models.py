@@ -4,7 +4,6 @@ EKF, and odometry that reports commands (followed late, at a share of their spee
 from __future__ import annotations
 
 import math
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -331,11 +330,7 @@ def test_the_shipped_robot_file_builds_a_model():
 
 @pytest.mark.skipif(not DATASET.is_dir(), reason="the UTIAS dataset is not in ../shared/data")
 def test_the_shipped_figures_are_what_the_calibration_derives():
-    sys.path.insert(0, str(ROBOTS_FILE.parents[2] / "bench"))
-    try:
-        from utias_calibration import calibrate
-    finally:
-        sys.path.pop(0)
+    from bench.landmarks.utias_calibration import calibrate
     from estimation_nodes.tools.importers.utias import read_run
 
     derived = calibrate([read_run(DATASET, robot) for robot in (1, 2, 3)])

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from estimation_nodes.core import errors
-from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid.belief import most_likely_state, pose_of
+from estimation_nodes.core.grid.laser import beam_endpoints, scan_log_likelihood
 from estimation_nodes.core.grid.likelihood_field import SensorField, grid_model
 from estimation_nodes.core.sim import planar
 from estimation_nodes.params import map_files as maps
@@ -29,7 +30,7 @@ def test_endpoints_start_at_the_laser(office):
     mount = (0.3, -0.1, 0.4)
     model = grid_model(office, 0.4, 12, sensor(mount), 10**6)
     ranges, angles = np.array([1.0, 2.5, 0.7]), np.array([-1.0, 0.0, 2.0])
-    ends = grid.beam_endpoints(model, ranges, angles)
+    ends = beam_endpoints(model, ranges, angles)
     for k, heading in enumerate(model.headings()):
         for b, (r, a) in enumerate(zip(ranges, angles)):
             x = mount[0] * math.cos(heading) - mount[1] * math.sin(heading) \
@@ -44,7 +45,7 @@ def test_a_laser_at_the_centre_scores_as_before(office):
     ranges, angles = np.array([1.0, 2.5, 0.7]), np.array([-1.0, 0.0, 2.0])
     theta = centred.headings()[:, None] + angles[None, :]
     r = ranges[None, :] / 0.4
-    np.testing.assert_array_equal(grid.beam_endpoints(centred, ranges, angles)[..., 1],
+    np.testing.assert_array_equal(beam_endpoints(centred, ranges, angles)[..., 1],
                                   np.floor(0.5 + r * np.cos(theta)))
 
 
@@ -66,9 +67,9 @@ def test_the_scan_of_a_laser_ahead_of_the_centre_finds_the_robot_not_the_laser(o
     seen = np.isfinite(ranges)
 
     def best(model):
-        scores = grid.scan_log_likelihood(model, ranges[seen], angles[seen])
+        scores = scan_log_likelihood(model, ranges[seen], angles[seen])
         scores[:, ~model.free] = -np.inf
-        return grid.pose_of(model, grid.most_likely_state(np.exp(scores - scores.max())))
+        return pose_of(model, most_likely_state(np.exp(scores - scores.max())))
 
     found = best(mounted)
     assert math.hypot(found[0] - robot[0], found[1] - robot[1]) < 0.15

@@ -1,9 +1,9 @@
-"""A shorter run of bench/numerical_health.py (the million-step run is in the README)."""
+"""A shorter run of bench/core/numerical_health.py (the million-step run is in the README)."""
 
 import importlib.util
 from pathlib import Path
 
-SCRIPT = Path(__file__).resolve().parents[2] / "bench" / "numerical_health.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "bench" / "core" / "numerical_health.py"
 
 
 def load():

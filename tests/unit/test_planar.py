@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
+from estimation_nodes.core.grid.motion import OdometryNoise
 from estimation_nodes.core.grid.occupancy import OCCUPIED, OccupancyMap
-from estimation_nodes.core.grid.steps import OdometryNoise
 from estimation_nodes.core.sim import planar
 from estimation_nodes.params import map_files as maps
 from tests.conftest import REPO

@@ -8,8 +8,8 @@ import pytest
 from estimation_nodes.core.grid import scan_fit
 from estimation_nodes.core.grid.likelihood_field import SensorField, grid_model
 from estimation_nodes.core.grid.localization import GridLocalization
+from estimation_nodes.core.grid.motion import OdometryNoise
 from estimation_nodes.core.grid.occupancy import FREE, OCCUPIED, OccupancyMap
-from estimation_nodes.core.grid.steps import OdometryNoise
 from estimation_nodes.core.sim import planar
 
 RESOLUTION = 0.05

@@ -1,4 +1,4 @@
-"""Compiled kernels of the grid filter (numba): the steps of grid/steps.py in fewer passes.
+"""Compiled kernels of the grid filter (numba): motion.py's and laser.py's steps in fewer passes.
 
 numpy's prediction makes some fifty passes over the belief tensor (a shift
 per layer and per bilinear weight, two rolls for the headings, padded copies
@@ -12,7 +12,7 @@ both paths against brute force.
 Importing this module imports numba; ``warm_up`` compiles the kernels or
 loads them from numba's cache (``cache=True``).
 
-The kernels check no index (numba does not): steps.py guarantees every one is
+The kernels check no index (numba does not): their callers guarantee every one is
 in bounds before it calls them. Beliefs are of the model's shape; the shifts
 are at most the grid's size plus one (a longer one moves everything off it) and
 the turn at most the number of headings, so each becomes an int64 exactly; the
@@ -144,7 +144,7 @@ def scan_log_likelihood(padded: FloatArray, pad_rows: int, pad_cols: int, offset
                         bins: int, rows: int, cols: int, out: FloatArray) -> None:
     """out[k, i, j] = sum_b padded[pad_rows + i + dr[k, b], pad_cols + j + dc[k, b]].
 
-    Unchecked: the caller (steps.py) pads by more than every |dr| and |dc|."""
+    Unchecked: the caller (laser.py) pads by more than every |dr| and |dc|."""
     beams = offsets.shape[1]
     for k in range(bins):
         for i in range(rows):

@@ -58,7 +58,8 @@ from enum import Enum
 
 import numpy as np
 
-from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.grid.model import GridModel
+from estimation_nodes.core.grid.motion import OdometryNoise, _motion_noise
 from estimation_nodes.core.validation import FloatArray
 
 Pose = tuple[float, float, float]
@@ -130,13 +131,13 @@ def moved(before: Pose, delta: tuple[float, float, float]) -> Pose:
             before[1] + trans * math.sin(before[2] + rot1), before[2] + rot1 + rot2)
 
 
-def jumped(model: grid.GridModel, noise: grid.OdometryNoise, before: Pose,
+def jumped(model: GridModel, noise: OdometryNoise, before: Pose,
            delta: tuple[float, float, float], after: Pose) -> bool:
     """Whether ``after`` is beyond the prediction's reach from ``before`` moved by
     ``delta`` (rot1, trans, rot2): further than REACH_SIGMAS of the motion noise and
     REACH_CELLS cells in position, or as many heading bins in heading."""
     x, y, yaw = moved(before, delta)
-    sigma_cells, sigma_bins = grid._motion_noise(delta, noise, model)
+    sigma_cells, sigma_bins = _motion_noise(delta, noise, model)
     reach_m = (REACH_SIGMAS * sigma_cells + REACH_CELLS) * model.resolution
     reach_rad = (REACH_SIGMAS * sigma_bins + REACH_CELLS) * model.bin_width
     return bool(math.hypot(after[0] - x, after[1] - y) > reach_m
@@ -153,7 +154,7 @@ class Spread:
     headings: FloatArray
 
 
-def spread_of(model: grid.GridModel) -> Spread:
+def spread_of(model: GridModel) -> Spread:
     xs, ys = model.cell_centres()
     rows, cols = np.nonzero(model.free)
     points = np.stack([xs[cols], ys[rows]])
@@ -229,7 +230,7 @@ class Astray:
         return float(self.p[(np.hypot(dx, dy) <= radius) & (np.abs(turn) <= angle)].sum())
 
 
-def astray_in(model: grid.GridModel, weights: FloatArray, step: int, cells: np.ndarray,
+def astray_in(model: GridModel, weights: FloatArray, step: int, cells: np.ndarray,
               tracked: float, centre: Pose) -> Astray:
     """The odometry-failure component after a correction: ``weights``, the scan's
     likelihood (relative to a peak) at the lattice's states (every ``step``-th heading,

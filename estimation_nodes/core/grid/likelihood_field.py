@@ -5,7 +5,7 @@ The localizer's state grid is the map reduced by an integer factor to its
 ``resolution``: a state cell is free when every map cell in it is free, and
 its likelihood field is the distance from the cell to the nearest occupied
 map cell (an exact Euclidean distance transform, scipy.ndimage), capped at
-``max_distance``.
+``max_distance``. A scan is scored on the field by laser.py.
 """
 
 from __future__ import annotations
@@ -15,9 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from estimation_nodes.core.errors import InvalidInputError, MapError
+from estimation_nodes.core.grid.model import GridModel, mounting_pose
 from estimation_nodes.core.grid.occupancy import FREE, OCCUPIED, OccupancyMap
 from estimation_nodes.core.grid.scan_fit import FitField
-from estimation_nodes.core.grid.steps import GridModel, mounting_pose
 from estimation_nodes.core.validation import (
     as_real_array,
     check_integer,

@@ -7,7 +7,7 @@ by the scans alone; 0 keeps the exact filter (recovery through
 ``global_localization``).
 
 With ``independent_beams`` K, a scan of N > K beams corrects with its likelihood raised
-to K / N (``steps.scan_weight``): its beams are not N independent measurements, and
+to K / N (``laser.scan_weight``): its beams are not N independent measurements, and
 taken as such they make the belief sure of a place the next scans may rule out.
 
 As AMCL: odometry is followed continuously, and a scan updates the filter
@@ -37,7 +37,7 @@ scored on the kidnap lattice's states around the predicted pose: the quality tha
 lower, the covariance that component's second moment added.
 
 Each method checks what it is given (a pose of three finite numbers, a scan of
-readings as ``steps.check_scan`` says, a stamp that is an integer) and raises
+readings as ``laser.check_scan`` says, a stamp that is an integer) and raises
 ``InvalidInputError`` naming it; the belief it holds is its own, so the steps
 on it are not checked again.
 """
@@ -54,9 +54,37 @@ from enum import Enum
 import numpy as np
 
 from estimation_nodes.core.errors import InvalidInputError
-from estimation_nodes.core.grid import failure, scan_fit
-from estimation_nodes.core.grid import steps as grid
-from estimation_nodes.core.grid import window
+from estimation_nodes.core.grid import failure, scan_fit, window
+from estimation_nodes.core.grid.belief import (
+    _covariance_around,
+    _entropy_bits,
+    _mass_near,
+    _most_likely_state,
+    _pose_of,
+    _refined_pose,
+)
+from estimation_nodes.core.grid.correction import _correct_in
+from estimation_nodes.core.grid.laser import (
+    _correct_scan,
+    _scan_log_likelihood,
+    check_scan,
+    scan_weight,
+)
+from estimation_nodes.core.grid.model import (
+    GridModel,
+    _states,
+    check_pose,
+    compiled_kernels,
+    mounting_pose,
+)
+from estimation_nodes.core.grid.motion import (
+    OdometryNoise,
+    _normalized,
+    _predict,
+    _spread,
+    odometry_delta,
+)
+from estimation_nodes.core.grid.priors import gaussian_prior, uniform_over_free
 from estimation_nodes.core.validation import (
     FloatArray,
     check_integer,
@@ -100,13 +128,13 @@ class OdometryStep(Enum):
 class GridLocalization:
     """Grid Markov localization of one robot on one map."""
 
-    def __init__(self, model: grid.GridModel, noise: grid.OdometryNoise, update_min_d: float,
+    def __init__(self, model: GridModel, noise: OdometryNoise, update_min_d: float,
                  update_min_a: float, max_odom_jump: float,
                  kidnap_probability: float = 0.0,
                  independent_beams: int | None = None, belief_floor: float = 0.0) -> None:
-        if not isinstance(model, grid.GridModel):
+        if not isinstance(model, GridModel):
             raise InvalidInputError(f"model: expected a GridModel, got {type(model).__name__}")
-        if not isinstance(noise, grid.OdometryNoise):
+        if not isinstance(noise, OdometryNoise):
             raise InvalidInputError(
                 f"noise: expected an OdometryNoise, got {type(noise).__name__}")
         update_min_d = check_non_negative("update_min_d", update_min_d)
@@ -117,7 +145,7 @@ class GridLocalization:
             raise InvalidInputError(
                 f"kidnap_probability: expected a probability in [0, 1], got {kidnap_probability}")
         if independent_beams is not None:
-            grid.scan_weight(independent_beams, 1)   # raises on a count below 1
+            scan_weight(independent_beams, 1)   # raises on a count below 1
         belief_floor = check_non_negative("belief_floor", belief_floor)
         if belief_floor >= 1.0:
             raise InvalidInputError(f"belief_floor: expected a probability below 1, got "
@@ -126,12 +154,12 @@ class GridLocalization:
         self.noise = noise
         self._independent_beams = independent_beams
         # Load a large grid's compiled kernels now, not during the first scan.
-        grid.compiled_kernels(int(np.prod(model.shape)))
+        compiled_kernels(int(np.prod(model.shape)))
         self._min_d, self._min_a, self._max_jump = update_min_d, update_min_a, max_odom_jump
         self._kidnap = kidnap_probability
         self._floor = belief_floor
         self._free_states = int(model.free.sum()) * model.heading_bins
-        self.belief: FloatArray = grid.uniform_over_free(model)
+        self.belief: FloatArray = uniform_over_free(model)
         #: Disjoint boxes holding every state with probability (the whole grid with
         #: belief_floor 0): the windows the steps run over.
         self._boxes: list[window.Box] = [window.full_box(model)]
@@ -161,15 +189,15 @@ class GridLocalization:
 
     def global_localization(self) -> None:
         """Not knowing where the robot is: uniform over the free cells."""
-        self._hold(grid.uniform_over_free(self.model))
+        self._hold(uniform_over_free(self.model))
         self.log_evidence = float("nan")
         self._forget_doubt()
         self._started = UNIFORM
 
     def set_prior(self, pose: Pose, covariance: FloatArray) -> None:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
-        x, y, yaw = grid.check_pose("pose", pose)
-        prior = grid.gaussian_prior(self.model, x, y, yaw, covariance)
+        x, y, yaw = check_pose("pose", pose)
+        prior = gaussian_prior(self.model, x, y, yaw, covariance)
         self._hold(prior)
         self._forget_doubt()
         self._started = "the initial pose"
@@ -214,7 +242,7 @@ class GridLocalization:
 
     def on_odometry(self, pose: Pose, stamp_ns: int | None = None) -> OdometryStep:
         """Follow odometry: how the message was taken (see ``OdometryStep``)."""
-        pose = grid.check_pose("pose", pose)
+        pose = check_pose("pose", pose)
         stamp_ns = _stamp(stamp_ns)
         if stamp_ns is not None and self._history and stamp_ns == self._history[-1][0]:
             return OdometryStep.REPEATED_STAMP
@@ -243,7 +271,7 @@ class GridLocalization:
 
     def _pose_for(self, stamp_ns: int | None, odometry: Pose | None) -> Pose | None:
         if odometry is not None:
-            return grid.check_pose("odometry", odometry)
+            return check_pose("odometry", odometry)
         return self._odometry_at(_stamp(stamp_ns))
 
     def odometry_at(self, stamp_ns: int | None) -> Pose | None:
@@ -254,7 +282,7 @@ class GridLocalization:
         """Score scans from this mount from now on (one read from the tf tree at the first
         scan); the belief is unchanged."""
         model = self.model
-        if tuple(model.laser_pose) == tuple(grid.mounting_pose(laser_pose)):
+        if tuple(model.laser_pose) == tuple(mounting_pose(laser_pose)):
             return
         fit = model.scan_fit
         self.model = dataclasses.replace(
@@ -287,15 +315,15 @@ class GridLocalization:
                stamp_ns: int | None = None, odometry: Pose | None = None) -> None:
         """Predict with the odometry from the last update to the scan's time (``odometry``
         as in ``due``), correct with the scan: the beams to score, without the readings of
-        no return (see ``steps.check_scan``: a NaN, infinite or negative range is refused)."""
-        ranges, angles = grid.check_scan(ranges, angles)
+        no return (see ``laser.check_scan``: a NaN, infinite or negative range is refused)."""
+        ranges, angles = check_scan(ranges, angles)
         pose = self._pose_for(stamp_ns, odometry)
         if pose is None:
             raise InvalidInputError(
                 "stamp_ns: no odometry yet: the motion since the last update is unknown")
-        delta = None if self._reference is None else grid.odometry_delta(self._reference, pose)
+        delta = None if self._reference is None else odometry_delta(self._reference, pose)
         weight = 1.0 if self._independent_beams is None else \
-            grid.scan_weight(self._independent_beams, ranges.size)
+            scan_weight(self._independent_beams, ranges.size)
         predicted = None if delta is None or self._mode is None else \
             failure.moved(self._mode, delta)
         astray = failure.Astray.none()
@@ -330,9 +358,9 @@ class GridLocalization:
         share's posterior probability."""
         belief = self.belief
         if delta is not None:
-            belief = grid._predict(belief, self.model, delta, self.noise)
+            belief = _predict(belief, self.model, delta, self.noise)
         if self._kidnap <= 0.0:
-            posterior, log_evidence = grid._correct_scan(
+            posterior, log_evidence = _correct_scan(
                 belief, self.model, ranges, angles, weight=weight,
                 box=window.full_box(self.model))
             return posterior, log_evidence, 0.0
@@ -342,8 +370,8 @@ class GridLocalization:
             (self._kidnap / self._free_states) * self.model.free
 
         def log_likelihood() -> FloatArray:
-            total = grid._scan_log_likelihood(self.model, ranges, angles, True,
-                                              window.full_box(self.model))
+            total = _scan_log_likelihood(self.model, ranges, angles, True,
+                                         window.full_box(self.model))
             return np.multiply(total, weight, out=total) if weight != 1.0 else total
 
         scores = log_likelihood()
@@ -353,7 +381,7 @@ class GridLocalization:
         # of the likelihood over the free states.
         share = math.log(self._kidnap / self._free_states) + peak + math.log(
             float(np.sum(np.exp(scores - peak), where=free)))
-        posterior, log_evidence = grid._correct_in(scores, belief, log_likelihood)
+        posterior, log_evidence = _correct_in(scores, belief, log_likelihood)
         return posterior, log_evidence, min(1.0, math.exp(share - log_evidence))
 
     def _windowed_step(self, ranges: FloatArray, angles: FloatArray,
@@ -369,10 +397,10 @@ class GridLocalization:
         else:
             # Each window with the kernels of the whole grid's size: numpy's on a small
             # window cost more than the compiled ones (a pass per heading).
-            spreads = [grid._spread(*self._window(box)[::-1], delta, self.noise,
-                                    grid_states=grid._states(self.model)) for box in boxes]
+            spreads = [_spread(*self._window(box)[::-1], delta, self.noise,
+                               grid_states=_states(self.model)) for box in boxes]
             total = sum(left for _, left in spreads)
-            priors = [grid._normalized(spread, total) for spread, _ in spreads]
+            priors = [_normalized(spread, total) for spread, _ in spreads]
         return window.correct_boxes(priors, boxes, self.model, ranges, angles, weight,
                                     self._kidnap, self._floor, phase=self.updates,
                                     predicted=predicted)
@@ -383,7 +411,7 @@ class GridLocalization:
         return sum((r1 - r0) * (c1 - c0) for r0, r1, c0, c1 in self._boxes) \
             * self.model.heading_bins
 
-    def _window(self, box: window.Box) -> tuple[grid.GridModel, FloatArray]:
+    def _window(self, box: window.Box) -> tuple[GridModel, FloatArray]:
         """The map and the belief within ``box`` (the belief a copy: the steps may write
         over it, and a failed step must leave the belief as it was)."""
         if box == window.full_box(self.model):
@@ -391,7 +419,7 @@ class GridLocalization:
         return window.crop(self.model, box), window.window_of(self.belief, box)
 
     def estimate(self, radius: float, angle: float) -> Estimate:
-        """The most likely pose (steps.refined_pose of the most likely state), the
+        """The most likely pose (belief.refined_pose of the most likely state), the
         covariance around it, and the probability within ``radius`` (m) and ``angle``
         (rad) of it: sums over the windows; both for a belief that may have lost the
         robot (``lost_probability``): the quality that much lower, the covariance the
@@ -400,7 +428,7 @@ class GridLocalization:
         model = self.model
         windows = [(box, window.window_of(self.belief, box)) for box in self._boxes]
         box, belief = max(windows, key=lambda pair: float(pair[1].max()))
-        pose = grid._refined_pose(belief, model, grid._most_likely_state(belief), box)
+        pose = _refined_pose(belief, model, _most_likely_state(belief), box)
         estimate = self._around(windows, box, belief, pose, radius, angle)
         if model.scan_fit is not None and self._last_scan is not None:
             # The belief's figures stay those of its own pose; the published pose is the
@@ -446,7 +474,7 @@ class GridLocalization:
         """The belief's mean around its most likely state (the pose ``estimate`` refines)."""
         windows = [(box, self.belief[:, box[0]:box[1], box[2]:box[3]]) for box in self._boxes]
         box, belief = max(windows, key=lambda pair: float(pair[1].max()))
-        return grid._refined_pose(belief, self.model, grid._most_likely_state(belief), box)
+        return _refined_pose(belief, self.model, _most_likely_state(belief), box)
 
     @property
     def lost_probability(self) -> float:
@@ -459,15 +487,15 @@ class GridLocalization:
                 radius: float, angle: float) -> Estimate:
         model = self.model
         if len(windows) == 1:
-            return Estimate(pose, grid._covariance_around(belief, model, pose, box),
-                            grid._mass_near(belief, model, pose, radius, angle, box))
+            return Estimate(pose, _covariance_around(belief, model, pose, box),
+                            _mass_near(belief, model, pose, radius, angle, box))
         # Each window's second moment about the pose carries the grid's quantization
         # variance once: counted once in the sum.
         quantization = np.diag([model.resolution ** 2 / 12] * 2 + [model.bin_width ** 2 / 12])
         covariance = quantization + sum(
-            grid._covariance_around(part, model, pose, where) - quantization
+            _covariance_around(part, model, pose, where) - quantization
             for where, part in windows)
-        quality = sum(grid._mass_near(part, model, pose, radius, angle, where)
+        quality = sum(_mass_near(part, model, pose, radius, angle, where)
                       for where, part in windows)
         return Estimate(pose, covariance, float(quality))
 
@@ -484,7 +512,7 @@ class GridLocalization:
             for index in np.argpartition(flat, flat.size - n)[flat.size - n:]:
                 if flat[index] > 0.0:
                     k, i, j = (int(v) for v in np.unravel_index(index, part.shape))
-                    found.append((float(flat[index]), grid._pose_of(self.model, (k, i, j), box)))
+                    found.append((float(flat[index]), _pose_of(self.model, (k, i, j), box)))
         found.sort(key=lambda pair: -pair[0])
         return [(pose, p) for p, pose in found[:count]]
 
@@ -498,7 +526,7 @@ class GridLocalization:
         return picture
 
     def entropy_bits(self) -> float:
-        return float(sum(grid._entropy_bits(window.window_of(self.belief, box))
+        return float(sum(_entropy_bits(window.window_of(self.belief, box))
                          for box in self._boxes)) + 0.0
 
 

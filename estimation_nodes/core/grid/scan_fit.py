@@ -2,7 +2,7 @@
 
 The grid filter's states are 0.1 m and 5 degrees apart, and its likelihood field
 is the map's reduced to that grid (each state cell takes the nearest obstacle of
-its map cells). The belief's mean around its mode (``steps.refined_pose``) is
+its map cells). The belief's mean around its mode (``belief.refined_pose``) is
 finer than the grid, but it is still the coarse field's answer. Here the pose
 is moved, within a state cell and a heading bin of that mean, to where the last
 scan's beams fit the map's own likelihood field best (the field at the map's
@@ -10,7 +10,7 @@ resolution, interpolated between cell centres): a local scan match, as a laser
 localizer's last step often is. Only the published pose moves; the belief, its
 covariance and the quality are the filter's.
 
-On the real logs, tracking (bench/real_logs.py against --no-scan-fit): Intel 98.6 ->
+On the real logs, tracking (bench/grid/real_logs.py against --no-scan-fit): Intel 98.6 ->
 99.7% within 0.2 m and 5 degrees, median error 4.7 -> 2.5 cm and 0.9 -> 0.3 degrees;
 ACES 94.5 -> 97.7%, 7.9 -> 3.7 cm, 1.2 -> 0.3 degrees. The fit costs about 2 ms per
 estimate (``fitted_pose``: a coarse-to-fine search, ~600 scores in five passes).

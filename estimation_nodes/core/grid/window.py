@@ -1,4 +1,4 @@
-"""The belief's support: the steps of grid/steps.py over the box of states with probability.
+"""The belief's support: the grid filter's steps over the box of states with probability.
 
 A tracked robot's belief is zero on all but a few square metres of a building,
 and a step never moves probability further than its motion and its noise
@@ -14,7 +14,7 @@ reach. So the filter runs over a window of (rows, columns), all headings:
   the predictions are normalized together;
 - the prediction runs on the window's crop of the belief and the map
   (``crop``), the correction scores the scan over the window only
-  (``steps._scan_log_likelihood(..., box=)``).
+  (``laser._scan_log_likelihood(..., box=)``).
 
 This is exact: outside the grown box the dense filter's prediction is zero
 (a blur or a shift of zeros), so its posterior is zero there as well, and
@@ -38,7 +38,11 @@ import numpy as np
 from scipy import ndimage
 
 from estimation_nodes.core.grid import failure
-from estimation_nodes.core.grid import steps as grid
+from estimation_nodes.core.errors import ZeroEvidenceError
+from estimation_nodes.core.grid.correction import _weighted
+from estimation_nodes.core.grid.laser import _scan_log_likelihood, _scan_log_likelihood_strided
+from estimation_nodes.core.grid.model import GridModel
+from estimation_nodes.core.grid.motion import OdometryNoise, _motion_noise, _reaching_taps
 from estimation_nodes.core.validation import FloatArray
 
 #: (first row, row past the last, first column, column past the last).
@@ -47,7 +51,7 @@ Box = tuple[int, int, int, int]
 States = tuple[np.ndarray, np.ndarray, np.ndarray, FloatArray]
 
 
-def full_box(model: grid.GridModel) -> Box:
+def full_box(model: GridModel) -> Box:
     rows, cols = model.free.shape
     return 0, rows, 0, cols
 
@@ -118,8 +122,8 @@ def _union(a: Box, b: Box) -> Box:
     return min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3])
 
 
-def grown_box(box: Box, model: grid.GridModel, delta: tuple[float, float, float],
-              noise: grid.OdometryNoise) -> Box:
+def grown_box(box: Box, model: GridModel, delta: tuple[float, float, float],
+              noise: OdometryNoise) -> Box:
     """Where a prediction with ``delta`` can put the probability now within ``box``."""
     rows, cols = model.free.shape
     trans = delta[1]
@@ -127,25 +131,25 @@ def grown_box(box: Box, model: grid.GridModel, delta: tuple[float, float, float]
     # bilinear split reaches one cell beyond its floor.
     reach = trans / model.resolution
     shift = math.ceil(reach) + 1 if reach < rows + cols else rows + cols
-    sigma_cells, _ = grid._motion_noise(delta, noise, model)
-    spread_rows = grid._reaching_taps(sigma_cells, rows).size // 2
-    spread_cols = grid._reaching_taps(sigma_cells, cols).size // 2
+    sigma_cells, _ = _motion_noise(delta, noise, model)
+    spread_rows = _reaching_taps(sigma_cells, rows).size // 2
+    spread_cols = _reaching_taps(sigma_cells, cols).size // 2
     r0, r1, c0, c1 = box
     return (max(0, r0 - shift - spread_rows), min(rows, r1 + shift + spread_rows),
             max(0, c0 - shift - spread_cols), min(cols, c1 + shift + spread_cols))
 
 
-def crop(model: grid.GridModel, box: Box) -> grid.GridModel:
+def crop(model: GridModel, box: Box) -> GridModel:
     """The map within ``box``: its free cells and field, its origin at the box's corner."""
     r0, r1, c0, c1 = box
     origin = (model.origin[0] + c0 * model.resolution, model.origin[1] + r0 * model.resolution)
     # Contiguous copies: the compiled kernels were compiled for those (warm_up), and a view
     # would make numba compile another version mid-run, where a Ctrl-C cannot stop it
     # cleanly (core/compiled_loader.py).
-    return grid.GridModel(np.ascontiguousarray(model.free[r0:r1, c0:c1]),
-                          np.ascontiguousarray(model.log_field[r0:r1, c0:c1]),
-                          model.log_outside, model.resolution, origin, model.heading_bins,
-                          model.laser_pose)
+    return GridModel(np.ascontiguousarray(model.free[r0:r1, c0:c1]),
+                     np.ascontiguousarray(model.log_field[r0:r1, c0:c1]),
+                     model.log_outside, model.resolution, origin, model.heading_bins,
+                     model.laser_pose)
 
 
 def window_of(belief: FloatArray, box: Box) -> FloatArray:
@@ -181,7 +185,7 @@ KIDNAP_STEP = 2
 KIDNAP_PHASES = 2
 
 
-def lattice_cells(model: grid.GridModel, phase: int) -> np.ndarray:
+def lattice_cells(model: GridModel, phase: int) -> np.ndarray:
     """The free cells of the kidnap lattice's part ``phase`` (mod KIDNAP_PHASES), as a
     mask over the lattice's rows and columns (model.free[::KIDNAP_STEP, ::KIDNAP_STEP]).
 
@@ -189,7 +193,7 @@ def lattice_cells(model: grid.GridModel, phase: int) -> np.ndarray:
     robot is scored from a lattice cell within KIDNAP_STEP cells of it every update,
     and from the nearest one every KIDNAP_PHASES updates, at 1 / KIDNAP_PHASES of the
     cost of scoring the whole lattice with every scan (half of a tracked update's time
-    on a building the size of the Intel lab's, bench/real_buildings.py --profile).
+    on a building the size of the Intel lab's, bench/grid/real_buildings.py --profile).
     """
     free = model.free[::KIDNAP_STEP, ::KIDNAP_STEP]
     rows = np.arange(free.shape[0])[:, None]
@@ -197,7 +201,7 @@ def lattice_cells(model: grid.GridModel, phase: int) -> np.ndarray:
     return free & ((rows + columns) % KIDNAP_PHASES == phase % KIDNAP_PHASES)
 
 
-def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridModel,
+def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
                   ranges: FloatArray, angles: FloatArray, weight: float, share: float,
                   floor: float, compiled: bool = True, phase: int = 0,
                   predicted: failure.Pose | None = None) -> Correction:
@@ -219,11 +223,11 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridMo
     step = KIDNAP_STEP
     lattice_free = lattice_cells(model, phase)
     free_states = int(lattice_free.sum()) * -(-model.heading_bins // step)
-    lls = [grid._scan_log_likelihood(model, ranges, angles, compiled, box) for box in boxes]
+    lls = [_scan_log_likelihood(model, ranges, angles, compiled, box) for box in boxes]
     lattice_ll = None
     if share > 0.0 and free_states > 0:
-        lattice_ll = grid._scan_log_likelihood_strided(model, ranges, angles, step, compiled,
-                                                       cells=lattice_free)
+        lattice_ll = _scan_log_likelihood_strided(model, ranges, angles, step, compiled,
+                                                  cells=lattice_free)
     for ll in [*lls, *([lattice_ll] if lattice_ll is not None else [])]:
         if weight != 1.0:
             np.multiply(ll, weight, out=ll)
@@ -232,24 +236,24 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: grid.GridMo
         peak = max(peak, float(np.max(lattice_ll, where=lattice_free[None],
                                       initial=-math.inf)))
     if not math.isfinite(peak):
-        raise grid.ZeroEvidenceError("every state with probability rules the scan out")
+        raise ZeroEvidenceError("every state with probability rules the scan out")
     parts = []
     for ll, prior in zip(lls, priors):
-        weighted, _ = grid._weighted(ll, peak, prior)
+        weighted, _ = _weighted(ll, peak, prior)
         if share > 0.0:
             weighted *= 1.0 - share
         parts.append(weighted)
     total = sum(float(part.sum()) for part in parts)
     astray = None
     if lattice_ll is not None:
-        lattice, found = grid._weighted(lattice_ll, peak, lattice_free)
+        lattice, found = _weighted(lattice_ll, peak, lattice_free)
         total += found * share / free_states
         if predicted is not None and total > 0.0:
             astray = failure.astray_in(model, lattice, step, lattice_free, total,
                                       predicted)
         lattice *= share / free_states
     if not total > 0.0:
-        raise grid.ZeroEvidenceError("every state with probability rules the scan out")
+        raise ZeroEvidenceError("every state with probability rules the scan out")
     log_evidence = peak + math.log(total)
     for part in parts:
         part /= total

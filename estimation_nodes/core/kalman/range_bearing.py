@@ -12,7 +12,7 @@ atan2(dy, dx) - theta - yaw, with dx = lx - px, dy = ly - py.
 A camera that finds a landmark's distance from its apparent size in the image may
 report not that range but the landmark's depth: its distance along the camera's
 axis, range cos(bearing) (``Ranging("depth")``; the UTIAS MRCLAM cameras do, see
-bench/utias_calibration.py). Either may carry a scale (an uncalibrated lens or
+bench/landmarks/utias_calibration.py). Either may carry a scale (an uncalibrated lens or
 target size): the reported value is ``scale`` times the true one.
 
 That scale may also be estimated with the pose, as a fourth state: x = (x, y, theta,

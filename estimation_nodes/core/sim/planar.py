@@ -17,8 +17,8 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 from estimation_nodes.core import geometry
+from estimation_nodes.core.grid.motion import OdometryNoise
 from estimation_nodes.core.grid.occupancy import OCCUPIED, UNKNOWN, OccupancyMap
-from estimation_nodes.core.grid.steps import OdometryNoise
 from estimation_nodes.core.validation import FloatArray
 
 Pose = tuple[float, float, float]

@@ -8,7 +8,8 @@ rosbag2 folder (MCAP or sqlite3): bags are read with the ``rosbags`` library and
 messages published as this ROS 2's types (tools/recording/bags.py), ``/tf`` and
 ``/tf_static`` included (``/tf_static`` latched, as its publishers do). ``--loop`` plays
 it again and again until Ctrl-C, as ``ros2 bag play --loop``: with ``--clock`` the time
-then jumps back at each pass, which a node under ``use_sim_time`` must take as a restart.
+then jumps back at each pass (and stands there LOOP_JUMP_PAUSE_S before the pass), which a
+node under ``use_sim_time`` must take as a restart.
 
 Each message goes out at its recorded time (the log time, scaled by 1/R), as its
 recorded CDR bytes, with the QoS its driver would use: a laser scan best effort
@@ -44,6 +45,11 @@ BEST_EFFORT_TYPES = {"sensor_msgs/msg/LaserScan"}
 LATCHED_TYPES = {"nav_msgs/msg/OccupancyGrid"}
 #: How long a play waits, at most, between two /clock messages (wall s) in a long gap.
 CLOCK_TICK_S = 0.05
+#: --loop --clock: how long (wall s) the clock stands at a new pass's start before its
+#: messages. /clock and the data come on different topics, in no order a subscriber is
+#: promised: a node that took the pass's first /tf before the jump back would clear it
+#: with the previous pass's.
+LOOP_JUMP_PAUSE_S = 0.5
 #: How long a play waits, at most, for its reliable messages to be acknowledged (s).
 ACK_TIMEOUT_S = 5.0
 
@@ -89,8 +95,13 @@ def _read_bag(path: Path, only: set[str] | None) -> list[Recorded]:
 
     if not path.exists():
         raise RecordingError(f"{path}: no such bag")
-    return [Recorded(stamp, topic, type_name, serialize_message(msg))
-            for stamp, topic, type_name, msg in bag_messages(path, only)]
+    left_out: dict[str, str] = {}
+    messages = [Recorded(stamp, topic, type_name, serialize_message(msg))
+                for stamp, topic, type_name, msg in bag_messages(path, only, left_out=left_out)]
+    for topic, type_name in sorted(left_out.items()):
+        print(f"estimation_play: {topic} left out: its type {type_name} is not installed "
+              f"here", file=sys.stderr)
+    return messages
 
 
 def qos_for(type_name: str, topic: str = ""):
@@ -143,6 +154,13 @@ class Player:
             self._clock_msg.clock.sec, self._clock_msg.clock.nanosec = divmod(
                 log_time_ns, 1_000_000_000)
             self._clock.publish(self._clock_msg)
+
+    def rewind(self) -> None:
+        """Before a pass again: the clock back at the recording's start, alone for a moment
+        (LOOP_JUMP_PAUSE_S)."""
+        if self._clock is not None and self._messages:
+            self._publish_clock(self._messages[0].log_time_ns)
+            time.sleep(LOOP_JUMP_PAUSE_S)
 
     def play(self, rate: float) -> int:
         """Publish every message at its time; the number published."""
@@ -261,6 +279,7 @@ def _run(args: argparse.Namespace, messages: list[Recorded]) -> int:
                 break
             print(f"estimation_play: pass {passes}: {published} messages published; again",
                   flush=True)
+            player.rewind()
         print(f"estimation_play: {published} messages published", flush=True)
         unacknowledged = player.wait_for_acknowledgements(ACK_TIMEOUT_S)
         if unacknowledged:

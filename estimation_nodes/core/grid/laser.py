@@ -1,0 +1,226 @@
+"""The likelihood-field sensor model over the grid (Probabilistic Robotics 6.4): a laser
+scan's log likelihood for every state, and the correction by a scan. The field it reads
+is made from the map by likelihood_field.py.
+
+- ``scan_log_likelihood``: for each beam and heading the end point is the
+  same cell offset from every state cell, so the log likelihood of a beam
+  over one heading layer is a shifted view of the log likelihood field.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from estimation_nodes.core.errors import InputSizeError, InvalidInputError
+from estimation_nodes.core.grid.correction import _correct_in
+from estimation_nodes.core.grid.model import (
+    GridModel,
+    _check_model,
+    _states,
+    check_belief,
+    compiled_kernels,
+)
+from estimation_nodes.core.validation import FloatArray, as_real_array, check_integer
+
+#: A scan's sum of log likelihoods stays within this (beams x the largest |log likelihood|
+#: of the model), so it never overflows.
+LOG_SUM_LIMIT = 1e300
+
+
+def check_scan(ranges: Any, angles: Any) -> tuple[FloatArray, FloatArray]:
+    """The beams of a scan to score, checked: (ranges, angles), one angle (rad, from the
+    robot's heading) per range (m), as float arrays.
+
+    Every range given is scored as a reading that hit something at that distance. A
+    laser's "no return" is not such a reading: REP 117's +inf (nothing within
+    range_max), -inf (closer than range_min) and NaN (no valid measurement), a negative
+    value, and a reading at or beyond the sensor's range_max (which the core does not
+    know). The caller leaves those beams out first, as the nodes' ``scan_beams``
+    (nodes/grid_messages.py) does; given one anyway, a NaN, infinite or negative range
+    is refused (``InvalidInputError`` naming ``ranges`` and the beam) rather than
+    silently dropped, so a caller that forgot to select its beams learns it at once
+    instead of scoring fewer beams than it thinks. A finite range longer than the map
+    ends off the map from every state cell (``log_outside``); the work and the memory
+    do not grow with it. No beams at all are a scan that says nothing: the correction
+    leaves the belief as it was.
+    """
+    r = as_real_array("ranges", ranges)
+    a = as_real_array("angles", angles)
+    if r.ndim != 1 or a.ndim != 1:
+        raise InputSizeError(f"ranges and angles: expected two lists of numbers, got shapes "
+                             f"{r.shape} and {a.shape}")
+    if r.size != a.size:
+        raise InputSizeError(f"ranges and angles: expected one angle per range, got "
+                             f"{r.size} ranges and {a.size} angles")
+    if r.size and not (r.min() >= 0.0 and r.max() < math.inf):   # NaN fails both
+        beam = int(np.flatnonzero(~(r >= 0.0) | ~(r < math.inf))[0])
+        raise InvalidInputError(
+            f"ranges: expected finite readings >= 0, got {float(r[beam])!r} at beam {beam} "
+            f"(leave out the beams of no return: NaN, inf, negative, at or beyond range_max)")
+    if a.size and not np.isfinite(a).all():
+        beam = int(np.flatnonzero(~np.isfinite(a))[0])
+        raise InvalidInputError(
+            f"angles: expected finite numbers, got {float(a[beam])!r} at beam {beam}")
+    return r, a
+
+
+def beam_endpoints(model: GridModel, ranges: FloatArray, angles: FloatArray) -> np.ndarray:
+    """(K, beams, 2) integer (row, column) offsets of each beam's end point from the
+    state cell, for each heading bin: the cell the end point falls in, measured from
+    the state cell's centre. Offsets are cut to the map's size (rows, columns): an end
+    point that far is off the map from every state cell, however far it is."""
+    return _beam_endpoints(_check_model(model), *check_scan(ranges, angles))
+
+
+def _beam_endpoints(model: GridModel, ranges: FloatArray, angles: FloatArray) -> np.ndarray:
+    rows, cols = model.free.shape
+    headings = model.headings()
+    mount_x, mount_y, mount_yaw = model.laser_pose
+    theta = (headings + mount_yaw)[:, None] + angles[None, :]
+    # Where the laser sits, in cells from the state cell's centre, for each heading (0 for
+    # a laser at the centre: the sums below are then the same bits as without it).
+    mount_rows = ((mount_x * np.sin(headings) + mount_y * np.cos(headings))
+                  / model.resolution)[:, None]
+    mount_cols = ((mount_x * np.cos(headings) - mount_y * np.sin(headings))
+                  / model.resolution)[:, None]
+    # A beam of rows + cols cells or more is longer than the map's diagonal: it ends off
+    # the map from every state cell, as it does at that length, which keeps the products
+    # finite (a range of 1e300 m in cells may overflow, and inf * sin(0) is NaN).
+    with np.errstate(over="ignore"):
+        r = np.minimum(ranges[None, :] / model.resolution, float(rows + cols))
+    ends = np.stack([np.clip(np.floor(0.5 + (mount_rows + r * np.sin(theta))), -rows, rows),
+                     np.clip(np.floor(0.5 + (mount_cols + r * np.cos(theta))), -cols, cols)],
+                    axis=-1)
+    return ends.astype(np.int64)
+
+
+def scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
+                        compiled: bool = True) -> FloatArray:
+    """Sum over the beams of log p(beam | state), for every state: (K, H, W).
+
+    ``ranges`` and ``angles`` are the beams to use, without the readings of no return
+    (``check_scan`` says which and what happens to them).
+    """
+    _check_model(model)
+    return _scan_log_likelihood(model, *check_scan(ranges, angles), compiled)
+
+
+def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
+                         compiled: bool = True,
+                         box: tuple[int, int, int, int] | None = None) -> FloatArray:
+    """The scan's log likelihood over every state, or over the states of the window
+    ``box`` (first row, row past the last, first column, column past the last; see
+    grid/window.py): (K, rows, columns) of the box. The compiled kernels or numpy's are
+    chosen by the grid's states, not the box's: numpy's cost a pass per heading and
+    beam, whatever the box's size."""
+    if ranges.size * model.log_bound > LOG_SUM_LIMIT:
+        raise InvalidInputError(f"ranges: {ranges.size} beams over log likelihoods as large "
+                                f"as {model.log_bound:g} would overflow their sum")
+    offsets = _beam_endpoints(model, ranges, angles)
+    padded, pad_rows, pad_cols = _padded_field(model, offsets)
+    r0, r1, c0, c1 = box if box is not None else (0, model.free.shape[0], 0,
+                                                  model.free.shape[1])
+    # The window's cell (i, j) is the map's (r0 + i, c0 + j): the same field, read
+    # from further in.
+    pad_rows, pad_cols = pad_rows + r0, pad_cols + c0
+    rows, cols = r1 - r0, c1 - c0
+    shape = (model.heading_bins, rows, cols)
+    kernels = compiled_kernels(_states(model), compiled)
+    if kernels is not None:
+        out = np.empty(shape)      # the kernel writes every element
+        kernels.scan_log_likelihood(padded, pad_rows, pad_cols, offsets, model.heading_bins,
+                                    rows, cols, out)
+        return out
+    total = np.zeros(shape)
+    for k in range(model.heading_bins):
+        layer = total[k]
+        for dr, dc in offsets[k]:
+            layer += padded[pad_rows + dr:pad_rows + dr + rows, pad_cols + dc:pad_cols + dc + cols]
+    return total
+
+
+def _scan_log_likelihood_strided(model: GridModel, ranges: FloatArray, angles: FloatArray,
+                                 step: int, compiled: bool = True,
+                                 cells: np.ndarray | None = None) -> FloatArray:
+    """The scan's log likelihood at every ``step``-th heading, row and column: the
+    states (step k, step i, step j) of ``_scan_log_likelihood``, in its order of sums;
+    0 at the lattice's cells that are not free, or not in ``cells`` (a mask over the
+    lattice's cells, at most its free ones) where given: only those are scored."""
+    offsets = np.ascontiguousarray(_beam_endpoints(model, ranges, angles)[::step])
+    padded, pad_rows, pad_cols = _padded_field(model, offsets)
+    lattice_free = model.free[::step, ::step] if cells is None else cells
+    shape = (offsets.shape[0], *lattice_free.shape)
+    kernels = compiled_kernels(_states(model), compiled)   # as the grid's other steps
+    if kernels is not None:
+        out = np.empty(shape)
+        rows, columns = np.nonzero(lattice_free)
+        row_starts = np.searchsorted(rows, np.arange(shape[1] + 1))
+        # nonzero's arrays are strided views: contiguous ones are what warm_up compiled for.
+        kernels.scan_log_likelihood_strided(padded, pad_rows, pad_cols, offsets, step,
+                                            row_starts, np.ascontiguousarray(columns), out)
+        return out
+    total = np.zeros(shape)
+    rows, cols = shape[1:]
+    for k in range(shape[0]):
+        layer = total[k]
+        for dr, dc in offsets[k]:
+            layer += padded[pad_rows + dr:pad_rows + dr + step * rows:step,
+                            pad_cols + dc:pad_cols + dc + step * cols:step]
+    total *= lattice_free
+    return total
+
+
+def _padded_field(model: GridModel, offsets: np.ndarray) -> tuple[FloatArray, int, int]:
+    """The log field with a border of ``log_outside`` wide enough for every offset: at
+    most (3 H + 2) x (3 W + 2) values, since the offsets are cut to the map's size."""
+    pad_rows = int(np.abs(offsets[..., 0]).max(initial=0)) + 1
+    pad_cols = int(np.abs(offsets[..., 1]).max(initial=0)) + 1
+    padded = np.pad(model.log_field, ((pad_rows, pad_rows), (pad_cols, pad_cols)),
+                    constant_values=model.log_outside)
+    return padded, pad_rows, pad_cols
+
+
+def correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angles: FloatArray,
+                 compiled: bool = True,
+                 independent_beams: int | None = None) -> tuple[FloatArray, float]:
+    """``correct`` with a scan: posterior and log evidence. (A compiled kernel that also
+    weighted each row as soon as its beams were summed measured slower: numba's scalar exp
+    costs more than the pass numpy's vectorized one needs.)
+
+    ``independent_beams`` K: the scan counts as K independent beams, not N (see
+    ``scan_weight``); None: every beam is independent of the others."""
+    _check_model(model)
+    belief = check_belief(belief, model)
+    ranges, angles = check_scan(ranges, angles)
+    weight = 1.0 if independent_beams is None else scan_weight(independent_beams, ranges.size)
+    return _correct_scan(belief, model, ranges, angles, compiled, weight)
+
+
+def scan_weight(independent_beams: int, beams: int) -> float:
+    """min(1, K / N): the power the likelihood of N beams is raised to when they carry the
+    information of K independent ones (a tempered likelihood). Neighbouring beams' errors
+    are correlated (the same grid's heading and position quantization, the same odometry
+    error, the same unmapped object), so the product of N beam likelihoods is far sharper
+    than what the scan tells; AMCL's beam skipping and Thrun et al.'s advice to use a
+    subset of beams are the same remedy."""
+    independent_beams = check_integer("independent_beams", independent_beams)
+    if independent_beams < 1:
+        raise InvalidInputError(f"independent_beams: expected >= 1, got {independent_beams}")
+    return min(1.0, independent_beams / beams) if beams else 1.0
+
+
+def _correct_scan(belief: FloatArray, model: GridModel, ranges: FloatArray, angles: FloatArray,
+                  compiled: bool = True, weight: float = 1.0,
+                  box: tuple[int, int, int, int] | None = None) -> tuple[FloatArray, float]:
+    """``correct_scan`` of arguments already checked; with ``box``, ``belief`` is the
+    window's (grid/window.py), zero outside it."""
+    def log_likelihood() -> FloatArray:
+        total = _scan_log_likelihood(model, ranges, angles, compiled, box)
+        if weight != 1.0:
+            np.multiply(total, weight, out=total)
+        return total
+
+    return _correct_in(log_likelihood(), belief, log_likelihood)
