@@ -157,26 +157,39 @@ def scan_log_likelihood(padded: FloatArray, pad_rows: int, pad_cols: int, offset
                     target[j] += segment[j]
 
 
+#: How many beams a lattice state's sum takes between two looks at its bound.
+CHECK_EVERY = 4
+
+
 @_jit
-def scan_log_likelihood_strided(padded: FloatArray, pad_rows: int, pad_cols: int,
-                                offsets: np.ndarray, step: int, row_starts: np.ndarray,
-                                columns: np.ndarray, out: FloatArray) -> None:
-    """out[k, i, j] = sum_b padded[pad_rows + step i + dr[k, b], pad_cols + step j + dc[k, b]]
-    for the columns j of row i listed in columns[row_starts[i]:row_starts[i + 1]] (the
-    free ones), 0 elsewhere: ``scan_log_likelihood`` at every ``step``-th row and column
-    (the offsets given are those of the headings wanted). Unchecked, as that one."""
-    bins, beams = offsets.shape[0], offsets.shape[1]
-    rows = out.shape[1]
-    out[:] = 0.0
+def scan_log_likelihood_cells(field: FloatArray, starts: np.ndarray, offsets: np.ndarray,
+                              below: FloatArray, most: float, out: FloatArray,
+                              scored: np.ndarray) -> None:
+    """out[k, n] = sum_b field[starts[n] + offsets[k, b]]: the log field flattened, a
+    state cell's position in it and each heading's beam end points as offsets from it;
+    the sums in the order of ``scan_log_likelihood``'s (the same bits).
+
+    A state's sum stops once its first beams make it less than ``below[n]`` even with
+    every beam left scoring ``most`` (the field's largest value): out[k, n] is then that
+    bound and scored[k, n] False. Unchecked, as ``scan_log_likelihood``."""
+    bins, beams = offsets.shape
+    count = starts.size
     for k in range(bins):
-        for i in range(rows):
-            target = out[k, i]
-            listed = columns[row_starts[i]:row_starts[i + 1]]
+        offset = offsets[k]
+        for n in range(count):
+            start = starts[n]
+            floor = below[n]
+            total = 0.0
+            done = True
             for b in range(beams):
-                row = padded[pad_rows + step * i + offsets[k, b, 0]]
-                start = pad_cols + offsets[k, b, 1]
-                for j in listed:
-                    target[j] += row[start + step * j]
+                total += field[start + offset[b]]
+                if b % CHECK_EVERY == CHECK_EVERY - 1 and \
+                        total + (beams - 1 - b) * most < floor:
+                    total += (beams - 1 - b) * most
+                    done = False
+                    break
+            out[k, n] = total
+            scored[k, n] = done
 
 
 def warm_up() -> None:
@@ -190,5 +203,5 @@ def warm_up() -> None:
     blur_cols_masked(belief, taps, np.ones((3, 3), dtype=np.bool_), out)
     offsets = np.zeros((2, 1, 2), dtype=np.int64)
     scan_log_likelihood(np.zeros((5, 5)), 1, 1, offsets, 2, 3, 3, out)
-    scan_log_likelihood_strided(np.zeros((5, 5)), 1, 1, offsets, 2, np.array([0, 1, 2]),
-                                np.array([0, 1]), out[:, :2, :2].copy())
+    scan_log_likelihood_cells(np.zeros(25), np.array([6, 8]), np.zeros((2, 1), dtype=np.int64),
+                              np.zeros(2), 0.0, np.empty((2, 2)), np.empty((2, 2), dtype=np.bool_))
