@@ -292,3 +292,20 @@ def test_support_boxes_group_near_cells_and_never_overlap():
     assert window.disjoint([(0, 5, 0, 5), (4, 9, 8, 12), (8, 12, 0, 9)]) == [(0, 12, 0, 12)]
     assert window.disjoint([(0, 5, 0, 5), (5, 9, 5, 9)]) == [(0, 5, 0, 5), (5, 9, 5, 9)]
 
+
+def test_more_groups_than_max_windows_are_joined_with_their_nearest_not_into_one_box():
+    footprint = np.zeros((200, 220), dtype=bool)
+    count = window.MAX_WINDOWS + 3
+    footprint[10, 10:10 + 10 * count:10] = True       # a row of groups 10 cells apart
+    footprint[180, 60:60 + 10 * count:10] = True      # another, far from the first
+    boxes = window.support_boxes(footprint)
+    assert len(boxes) == 2
+    covered = np.zeros_like(footprint)
+    for r0, r1, c0, c1 in boxes:
+        covered[r0:r1, c0:c1] = True
+    assert covered[footprint].all()
+    assert covered.sum() < 0.01 * footprint.size
+    # Few enough groups keep a window each.
+    few = np.zeros_like(footprint)
+    few[10, 10:10 + 10 * window.MAX_WINDOWS:10] = True
+    assert len(window.support_boxes(few)) == window.MAX_WINDOWS

@@ -74,22 +74,30 @@ def support_box(belief: FloatArray) -> Box | None:
 #: Supports closer than this many cells share a window: a window of its own costs a pass
 #: of each step, worth it only for a mode apart from the rest.
 JOIN_CELLS = 8
-#: More separate supports than this are held in one window (their bounding box).
+#: At most this many windows: more groups of supports are joined with their nearest
+#: (``support_boxes``).
 MAX_WINDOWS = 12
 
 
 def support_boxes(footprint: np.ndarray) -> list[Box]:
     """Disjoint boxes holding every True cell of ``footprint`` (H, W): one per group of
-    cells within JOIN_CELLS of each other (at most MAX_WINDOWS, else one box of all);
-    empty when there is none."""
+    cells within JOIN_CELLS of each other; empty when there is none.
+
+    More groups than MAX_WINDOWS (a global start's belief after its first scans, a kidnap
+    lattice's many kept states) are joined with their nearest, the distance that joins
+    two groups doubled until at most MAX_WINDOWS are left: the windows then hold the
+    groups and what lies between near ones, not the building's box."""
     if not footprint.any():
         return []
-    joined = ndimage.binary_dilation(footprint, iterations=JOIN_CELLS // 2)
+    reach = JOIN_CELLS // 2
+    joined = ndimage.binary_dilation(footprint, iterations=reach)
     labels, count = ndimage.label(joined, structure=np.ones((3, 3)))
     if count > MAX_WINDOWS:
-        box = support_box(footprint[None])
-        assert box is not None
-        return [box]
+        # The dilation's reach as a distance (taxicab: its cross-shaped steps).
+        distance = ndimage.distance_transform_cdt(~footprint, metric="taxicab")
+        while count > MAX_WINDOWS:
+            reach *= 2
+            labels, count = ndimage.label(distance <= reach, structure=np.ones((3, 3)))
     boxes = []
     for found in ndimage.find_objects(labels * footprint):
         if found is not None:
