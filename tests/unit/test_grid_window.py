@@ -214,7 +214,8 @@ def test_a_lattice_state_stops_being_scored_only_below_its_bound():
     assert 0 < scored.sum() < scored.size
     assert scored[:, ::3].all()
     np.testing.assert_array_equal(compiled[scored], dense[scored])
-    assert (compiled[~scored] >= dense[~scored]).all()
+    # Upper bounds (to the rounding of a sum in another order).
+    assert (compiled[~scored] >= dense[~scored] - 1e-9).all()
     assert (compiled[~scored] < below[None].repeat(scored.shape[0], 0)[~scored]).all()
 
 

@@ -158,20 +158,22 @@ def scan_log_likelihood(padded: FloatArray, pad_rows: int, pad_cols: int, offset
 
 
 #: How many beams a lattice state's sum takes between two looks at its bound.
-CHECK_EVERY = 4
+CHECK_EVERY = 2
 
 
 @_jit
 def scan_log_likelihood_cells(field: FloatArray, starts: np.ndarray, offsets: np.ndarray,
-                              below: FloatArray, most: float, out: FloatArray,
-                              scored: np.ndarray) -> None:
+                              below: FloatArray, most: float, order: np.ndarray,
+                              out: FloatArray, scored: np.ndarray) -> None:
     """out[k, n] = sum_b field[starts[n] + offsets[k, b]]: the log field flattened, a
     state cell's position in it and each heading's beam end points as offsets from it;
     the sums in the order of ``scan_log_likelihood``'s (the same bits).
 
-    A state's sum stops once its first beams make it less than ``below[n]`` even with
-    every beam left scoring ``most`` (the field's largest value): out[k, n] is then that
-    bound and scored[k, n] False. Unchecked, as ``scan_log_likelihood``."""
+    Where below[n] > -inf the beams are first summed in ``order`` (spread over the scan:
+    the first few already tell most states apart), and the sum stops once it is less
+    than below[n] even with every beam left scoring ``most`` (the field's largest
+    value): out[k, n] is then that bound and scored[k, n] False. A state that never
+    stops is summed again in the beams' order. Unchecked, as ``scan_log_likelihood``."""
     bins, beams = offsets.shape
     count = starts.size
     for k in range(bins):
@@ -179,17 +181,22 @@ def scan_log_likelihood_cells(field: FloatArray, starts: np.ndarray, offsets: np
         for n in range(count):
             start = starts[n]
             floor = below[n]
+            scored[k, n] = True
+            if floor > -np.inf:
+                total = 0.0
+                for m in range(beams):
+                    total += field[start + offset[order[m]]]
+                    left = beams - 1 - m
+                    if m % CHECK_EVERY == CHECK_EVERY - 1 and total + left * most < floor:
+                        out[k, n] = total + left * most
+                        scored[k, n] = False
+                        break
+                if not scored[k, n]:
+                    continue
             total = 0.0
-            done = True
             for b in range(beams):
                 total += field[start + offset[b]]
-                if b % CHECK_EVERY == CHECK_EVERY - 1 and \
-                        total + (beams - 1 - b) * most < floor:
-                    total += (beams - 1 - b) * most
-                    done = False
-                    break
             out[k, n] = total
-            scored[k, n] = done
 
 
 def warm_up() -> None:
@@ -204,4 +211,5 @@ def warm_up() -> None:
     offsets = np.zeros((2, 1, 2), dtype=np.int64)
     scan_log_likelihood(np.zeros((5, 5)), 1, 1, offsets, 2, 3, 3, out)
     scan_log_likelihood_cells(np.zeros(25), np.array([6, 8]), np.zeros((2, 1), dtype=np.int64),
-                              np.zeros(2), 0.0, np.empty((2, 2)), np.empty((2, 2), dtype=np.bool_))
+                              np.zeros(2), 0.0, np.zeros(1, dtype=np.int64), np.empty((2, 2)),
+                              np.empty((2, 2), dtype=np.bool_))

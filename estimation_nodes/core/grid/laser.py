@@ -167,7 +167,7 @@ def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArra
 
 #: How many beams a listed state's sum takes between two looks at its bound (compiled.py's
 #: CHECK_EVERY: both paths stop the same sums).
-CHECK_EVERY = 4
+CHECK_EVERY = 2
 
 
 def _scan_log_likelihood_cells(model: GridModel, reads: ScanReads, step: int,
@@ -193,34 +193,74 @@ def _scan_log_likelihood_cells(model: GridModel, reads: ScanReads, step: int,
     below = np.full(starts.size, -math.inf) if below is None else \
         np.ascontiguousarray(below, dtype=np.float64)
     most = max(float(model.log_field.max()), model.log_outside)
+    beams = flat_offsets.shape[1]
+    order = _spread_order(beams)
     field = padded.ravel()
     out = np.empty((offsets.shape[0], starts.size))
     scored = np.ones(out.shape, dtype=bool)
     kernels = compiled_kernels(_states(model), compiled)   # as the grid's other steps
     if kernels is not None:
-        kernels.scan_log_likelihood_cells(field, starts, flat_offsets, below, most, out,
-                                          scored)
+        kernels.scan_log_likelihood_cells(field, starts, flat_offsets, below, most, order,
+                                          out, scored)
         return out, scored
-    beams = flat_offsets.shape[1]
+    bounded = below > -math.inf
     for k in range(out.shape[0]):
-        total, going = np.zeros(starts.size), scored[k]
-        for b, offset in enumerate(flat_offsets[k]):
+        total, going = np.zeros(starts.size), bounded.copy()
+        for m, offset in enumerate(flat_offsets[k][order]):
             total[going] += field[starts[going] + offset]
-            if b % CHECK_EVERY == CHECK_EVERY - 1:
-                stops = going & (total + (beams - 1 - b) * most < below)
-                total[stops] += (beams - 1 - b) * most
+            if m % CHECK_EVERY == CHECK_EVERY - 1:
+                stops = going & (total + (beams - 1 - m) * most < below)
+                total[stops] += (beams - 1 - m) * most
                 going &= ~stops
+                scored[k, stops] = False
+        summed = scored[k]
+        total[summed] = 0.0
+        for offset in flat_offsets[k]:
+            total[summed] += field[starts[summed] + offset]
         out[k] = total
     return out, scored
 
 
+#: The beams' order for a bound: every SPREAD-th beam first, then the next of each.
+SPREAD = 6
+
+
+def _spread_order(beams: int) -> np.ndarray:
+    """0, SPREAD, 2 SPREAD, ..., 1, 1 + SPREAD, ...: neighbouring beams say much the same,
+    so the first few of this order tell a wrong state sooner than the first few of the
+    scan."""
+    return np.concatenate([np.arange(first, beams, SPREAD) for first in range(SPREAD)]) \
+        .astype(np.int64)
+
+
+#: The padded field's border grows in steps of this many cells, so that the scans of one
+#: map mostly share one padded field (``_padded_field``'s cache).
+PAD_STEP = 64
+#: Padded fields kept: one per map in use (a process may hold several localizers).
+PADDED_KEPT = 4
+_padded: dict[int, tuple[FloatArray, int, int, FloatArray]] = {}
+
+
 def _padded_field(model: GridModel, offsets: np.ndarray) -> tuple[FloatArray, int, int]:
     """The log field with a border of ``log_outside`` wide enough for every offset: at
-    most (3 H + 2) x (3 W + 2) values, since the offsets are cut to the map's size."""
-    pad_rows = int(np.abs(offsets[..., 0]).max(initial=0)) + 1
-    pad_cols = int(np.abs(offsets[..., 1]).max(initial=0)) + 1
+    most (3 H + 2) x (3 W + 2) values, since the offsets are cut to the map's size. Made
+    once per map and border (the border rounded up to PAD_STEP cells), not per scan: a
+    building's is megabytes."""
+    rows, cols = model.log_field.shape
+    needed_rows = int(np.abs(offsets[..., 0]).max(initial=0)) + 1
+    needed_cols = int(np.abs(offsets[..., 1]).max(initial=0)) + 1
+    key = id(model.log_field)
+    cached = _padded.get(key)
+    if cached is not None and cached[0] is model.log_field and cached[1] >= needed_rows \
+            and cached[2] >= needed_cols:
+        return cached[3], cached[1], cached[2]
+    pad_rows = min(-(-needed_rows // PAD_STEP) * PAD_STEP, rows + 1)
+    pad_cols = min(-(-needed_cols // PAD_STEP) * PAD_STEP, cols + 1)
     padded = np.pad(model.log_field, ((pad_rows, pad_rows), (pad_cols, pad_cols)),
                     constant_values=model.log_outside)
+    if len(_padded) >= PADDED_KEPT and key not in _padded:
+        _padded.pop(next(iter(_padded)))
+    _padded[key] = (model.log_field, pad_rows, pad_cols, padded)
     return padded, pad_rows, pad_cols
 
 

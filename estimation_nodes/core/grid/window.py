@@ -87,22 +87,31 @@ def support_boxes(footprint: np.ndarray) -> list[Box]:
     lattice's many kept states) are joined with their nearest, the distance that joins
     two groups doubled until at most MAX_WINDOWS are left: the windows then hold the
     groups and what lies between near ones, not the building's box."""
-    if not footprint.any():
+    whole = support_box(footprint[None])
+    if whole is None:
         return []
     reach = JOIN_CELLS // 2
-    joined = ndimage.binary_dilation(footprint, iterations=reach)
+    # The groups within the support's box grown by the reach: the same as over the grid,
+    # at the cost of the box (a tracked robot's few metres, not the building).
+    rows, cols = footprint.shape
+    r0, c0 = max(whole[0] - reach, 0), max(whole[2] - reach, 0)
+    near = footprint[r0:min(whole[1] + reach, rows), c0:min(whole[3] + reach, cols)]
+    joined = ndimage.binary_dilation(near, iterations=reach)
     labels, count = ndimage.label(joined, structure=np.ones((3, 3)))
     if count > MAX_WINDOWS:
         # The dilation's reach as a distance (taxicab: its cross-shaped steps).
+        r0 = c0 = 0
+        near = footprint
         distance = ndimage.distance_transform_cdt(~footprint, metric="taxicab")
         while count > MAX_WINDOWS:
             reach *= 2
             labels, count = ndimage.label(distance <= reach, structure=np.ones((3, 3)))
     boxes = []
-    for found in ndimage.find_objects(labels * footprint):
+    for found in ndimage.find_objects(labels * near):
         if found is not None:
-            rows, cols = found
-            boxes.append((rows.start, rows.stop, cols.start, cols.stop))
+            box_rows, box_cols = found
+            boxes.append((r0 + box_rows.start, r0 + box_rows.stop, c0 + box_cols.start,
+                          c0 + box_cols.stop))
     return disjoint(boxes)
 
 
