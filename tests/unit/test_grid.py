@@ -280,6 +280,20 @@ def test_gaussian_prior_is_the_gaussian_over_the_free_states():
     np.testing.assert_allclose(prior, expected / expected.sum(), rtol=1e-9, atol=1e-15)
 
 
+def test_a_prior_written_over_a_belief_is_the_same_and_a_refused_one_writes_nothing():
+    model = small_model(rows=9, cols=11, bins=8, obstacles=0.3)
+    covariance = np.diag([0.04, 0.09, 0.3])
+    held = random_belief(model)
+    prior = gaussian_prior(model, 0.1, 1.6, 3.0, covariance, out=held)
+    assert prior is held
+    np.testing.assert_array_equal(prior, gaussian_prior(model, 0.1, 1.6, 3.0, covariance))
+    before = held.copy()
+    with pytest.raises(errors.NonFiniteResultError):
+        gaussian_prior(model, 1e300, 1e300, 0.0, covariance, out=held)
+    np.testing.assert_array_equal(held, before)
+    np.testing.assert_array_equal(uniform_over_free(model, out=held), uniform_over_free(model))
+
+
 def test_a_prior_that_covers_no_free_cell_goes_to_the_nearest_free_states():
     model = small_model(rows=9, cols=11, bins=8, obstacles=0.0)
     free = model.free.copy()
