@@ -351,6 +351,20 @@ def test_the_compiled_prediction_equals_numpys(delta):
     assert fast[1] == pytest.approx(slow[1], rel=1e-12)
 
 
+@pytest.mark.parametrize("delta", [(0.3, 0.17, -0.1), (0.0, 0.0, 0.0)])
+def test_the_compiled_prediction_of_a_few_heading_layers_equals_numpys(delta):
+    """The compiled passes skip the layers without probability: the same prediction."""
+    pytest.importorskip("numba")
+    model = compiled_sized_model()
+    noise = OdometryNoise(alpha1=0.1, alpha2=0.3, alpha3=0.15, alpha4=0.05)
+    belief = random_belief(model)
+    belief[[k for k in range(model.heading_bins) if k not in (0, 3, 4)]] = 0.0
+    belief /= belief.sum()
+    np.testing.assert_allclose(predict(belief, model, delta, noise),
+                               predict(belief, model, delta, noise, compiled=False),
+                               rtol=0, atol=1e-15)
+
+
 def test_a_scan_of_more_beams_than_independent_ones_is_a_tempered_likelihood():
     model = small_model()
     belief = random_belief(model)
