@@ -167,6 +167,26 @@ def twist_messages(run: UtiasRun, figures: NoiseFigures) -> Iterator[tuple[int, 
 
 
 @dataclass(frozen=True)
+class HeadingDrift:
+    """How a robot's commanded heading goes wrong over the longest window: a steady turn
+    bias (the mean error over the window's length) and a random walk about it."""
+
+    window: float
+    #: The mean heading error over the window's length (rad/s): a bias of the turn rate.
+    bias: float
+    #: The error's variance about that mean, over the window's length (rad^2/s).
+    walk_rate: float
+    #: The variance as a random walk's (mean included), what the yaw's process noise holds.
+    total_rate: float
+
+
+def heading_drift(run: UtiasRun, window: float = HEADING_WINDOWS[-1]) -> HeadingDrift:
+    errors = dead_reckoning_errors(run, window)[:, 2]
+    return HeadingDrift(window, float(np.mean(errors)) / window,
+                        float(np.var(errors)) / window, float(np.mean(errors ** 2)) / window)
+
+
+@dataclass(frozen=True)
 class Consistency:
     """How a run's estimates and covariances held the truth."""
 
@@ -226,6 +246,13 @@ def main() -> None:
     print(table(["robot", "noise figures", "outputs", "in the 95% ellipse",
                  "by thirds of the run", "final error m", "final sqrt(trace P_xy) m"],
                 rows))
+    drifts = [(robot, heading_drift(read_run(args.dataset, robot))) for robot in args.robots]
+    print(f"\nthe commanded heading's error over {drifts[0][1].window:g} s windows: a steady "
+          "turn bias and a random walk about it (the yaw's process noise is one rate for "
+          "both)")
+    print(table(["robot", "turn bias mrad/s", "random walk rad^2/s", "as one rate rad^2/s"],
+                [[str(robot), f"{1e3 * drift.bias:+.2f}", f"{drift.walk_rate:.4f}",
+                  f"{drift.total_rate:.4f}"] for robot, drift in drifts]))
 
 
 if __name__ == "__main__":

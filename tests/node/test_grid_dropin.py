@@ -13,12 +13,14 @@ import pytest
 from geometry_msgs.msg import PoseArray, PoseWithCovarianceStamped
 from lifecycle_msgs.msg import State, Transition
 from lifecycle_msgs.srv import ChangeState, GetState
+from rclpy.lifecycle import TransitionCallbackReturn
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import LaserScan
 from std_srvs.srv import Empty
 from tf2_msgs.msg import TFMessage
 
+from estimation_nodes.core.grid.likelihood_field import SensorField, grid_model
 from estimation_nodes.core.sim import planar
 from estimation_nodes.core.transforms.buffer import TransformBuffer, TransformRejected
 from estimation_nodes.core.transforms.rigid import Transform
@@ -246,3 +248,78 @@ def test_a_bag_played_again_resets_and_the_second_pass_localizes_as_the_first(
     assert len(updates) >= 6 and updates == sorted(s for s in second if s[0] >= T0 // SECOND)
     for key in updates:
         np.testing.assert_allclose(second[key], first[key], atol=1e-12)
+
+
+@pytest.mark.timeout(60)
+def test_amcls_parameter_names_reach_the_filter(context, executor, localizer):
+    """The rows of the nav2_amcl table that say "same": each of AMCL's names sets what the
+    filter uses."""
+    node = localizer(autostart=True, alpha1=0.11, alpha2=0.12, alpha3=0.13, alpha4=0.14,
+                     laser_max_range=9.5, laser_likelihood_max_dist=1.5, max_beams=40,
+                     laser_z_hit=0.7, laser_z_rand=0.3, laser_sigma_hit=0.15,
+                     update_min_d=0.4, update_min_a=0.3, global_frame_id="world",
+                     odom_frame_id="wheels", base_frame_id="base_footprint",
+                     transform_tolerance=0.3)
+    localization, settings = node.localization, node._settings
+    noise = localization.noise
+    assert (noise.alpha1, noise.alpha2, noise.alpha3, noise.alpha4) == (0.11, 0.12, 0.13, 0.14)
+    # The likelihood field is the one these laser parameters make.
+    sensor = SensorField(z_hit=0.7, z_rand=0.3, sigma_hit=0.15, max_range=9.5,
+                         max_distance=1.5)
+    expected = grid_model(read_map_file(CORRIDOR), settings.resolution, 36, sensor,
+                          settings.max_states)
+    np.testing.assert_array_equal(localization.model.log_field, expected.log_field)
+    assert localization.model.log_outside == expected.log_outside
+    assert settings.max_beams == 40
+    assert (localization._min_d, localization._min_a) == (0.4, 0.3)
+    frames = settings.frames
+    assert (frames.global_frame_id, frames.odom_frame_id, frames.base_frame_id,
+            frames.transform_tolerance) == ("world", "wheels", "base_footprint", 0.3)
+
+
+@pytest.mark.timeout(60)
+def test_update_min_d_and_update_min_a_decide_which_scans_update(context, executor,
+                                                                 localizer):
+    """AMCL's rule: a scan updates after update_min_d of travel or update_min_a of turn
+    since the last update (the first at once); the others are answered without one."""
+    node = localizer(autostart=True, update_min_d=0.5, update_min_a=1.0)
+    robot = Robot(context, executor)
+    robot.mount()
+    assert spin_until(executor, lambda: robot.scans.get_subscription_count() > 0, 10.0)
+    # A scan at every step (0.2 m, 0.01 rad): the first, then every third (0.6 m) updates.
+    drive(robot, node, range(0, 10))
+    assert (node.handled["scan"], node.handled["scan_without_motion"]) == (4, 6)
+
+
+@pytest.mark.timeout(60)
+def test_without_tf_broadcast_no_map_to_odom_is_sent(context, executor, localizer):
+    node = localizer(autostart=True, tf_broadcast=False)
+    robot = Robot(context, executor)
+    robot.mount()
+    assert spin_until(executor, lambda: robot.scans.get_subscription_count() > 0, 10.0)
+    drive(robot, node, range(0, 6, 2))
+    spin_until(executor, lambda: False, 0.5)      # what was sent is in by now
+    assert node.handled["scan"] >= 1 and not robot.heard.frames()
+
+
+@pytest.mark.timeout(60)
+def test_an_initialpose_heard_while_inactive_is_taken_at_activation(context, executor,
+                                                                    localizer, make_node):
+    """As AMCL: the latest initial pose sent before activation is the prior once active."""
+    node = localizer()
+    assert node.trigger_configure() == TransitionCallbackReturn.SUCCESS
+    sender = make_node("rviz")
+    publisher = sender.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
+    assert spin_until(executor, lambda: publisher.get_subscription_count() > 0, 10.0)
+    msg = PoseWithCovarianceStamped()
+    msg.header.frame_id = "map"
+    msg.pose.pose.position.x, msg.pose.pose.position.y = 3.0, 2.0
+    msg.pose.pose.orientation.w = 1.0
+    msg.pose.covariance[0] = msg.pose.covariance[7] = 0.04
+    msg.pose.covariance[35] = 0.01
+    publisher.publish(msg)
+    assert spin_until(executor, lambda: node._pending_initial_pose is not None, 10.0)
+    assert node.handled["initialpose"] == 0
+    assert node.trigger_activate() == TransitionCallbackReturn.SUCCESS
+    assert node.handled["initialpose"] == 1
+    assert math.dist(node.localization.estimate(0.5, 0.5).pose[:2], (3.0, 2.0)) < 0.1

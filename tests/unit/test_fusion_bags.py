@@ -14,6 +14,8 @@ rewrite with --roll/--yaw swapped the two; with it the roll converges to pi.)
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -98,3 +100,35 @@ def test_estimation_fuse_refuses_a_bad_parameter_file_in_one_line(tmp_path, caps
     err = capsys.readouterr().err
     assert code == 2
     assert "odom0_config: expected 15 booleans" in err
+
+
+#: Run in a process of its own (the kernels' signatures grow in a process, never shrink):
+#: which kernels a bag's readings made numba compile anew after warm_up.
+COMPILED_DURING_A_RUN = """
+import sys
+from estimation_nodes.core.fusion import steps
+from estimation_nodes.tools.fusion import offline
+steps.prepare_compiled()
+kernels = steps.kernels()
+dispatchers = {name: getattr(kernels, name) for name in dir(kernels)
+               if hasattr(getattr(kernels, name), "signatures")}
+before = {name: len(d.signatures) for name, d in dispatchers.items()}
+for kind in ("ekf", "ukf"):
+    offline.main([sys.argv[1], "--params-file", sys.argv[2].format(kind=kind)])
+print("compiled during the run:",
+      sorted(name for name, d in dispatchers.items() if len(d.signatures) > before[name]))
+"""
+
+
+@pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/robot_localization is absent")
+@pytest.mark.timeout(300)
+def test_a_bags_readings_need_no_kernel_but_those_warm_up_made():
+    """The node and estimation_fuse load the kernels at start (warm_up); a reading whose
+    arrays had other types (a bag reader's read-only buffers) would make numba compile a
+    second version in the middle of a run, seconds on a fresh install."""
+    params = str(FILES / "test_{kind}_localization_node_bag2.yaml")
+    result = subprocess.run([sys.executable, "-c", COMPILED_DURING_A_RUN,
+                             str(SHARED / "test2.bag"), params],
+                            capture_output=True, text=True, timeout=280)
+    assert result.returncode == 0, result.stderr
+    assert "compiled during the run: []" in result.stdout, result.stdout

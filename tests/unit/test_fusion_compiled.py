@@ -185,3 +185,43 @@ def test_the_inputs_kernels_equal_numpys(seed):
                                 remove_gravity, inputs.GRAVITY, mount),
             inputs.acceleration(0, linear, covariance3, every, rates, alpha, seen_from,
                                 remove_gravity, inputs.GRAVITY, mount, compiled=False))
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_an_imu_readings_kernel_equals_numpys(seed):
+    """inputs.imu_values in one kernel: each part's entries as numpy's, with and without an
+    attitude and gravity, and NaNs where the reading has them (its entries then left
+    unmeasured, as by the part's own function)."""
+    rng = np.random.default_rng(seed)
+    mount = random_mount(rng)
+    quaternion = tuple(rng.normal(size=4))
+    covariances = [random_covariance(rng, 3) for _ in range(3)]
+    angular, linear, rates, alpha = (rng.normal(size=3) for _ in range(4))
+    if seed % 3 == 0:
+        angular[1] = math.nan
+    gravity_attitude = state.rotation_from_quaternion(*quaternion)
+    for attitude_of, seen_from in ((quaternion, gravity_attitude), (None, gravity_attitude),
+                                   (quaternion, None)):
+        arguments = (attitude_of, covariances[0], angular, covariances[1], linear,
+                     covariances[2], rates, alpha, seen_from, inputs.GRAVITY, mount)
+        compiled = inputs.imu_values(*arguments)
+        reference = inputs.imu_values(*arguments, compiled=False)
+        np.testing.assert_allclose(compiled[0], reference[0], rtol=0.0, atol=1e-12)
+        np.testing.assert_allclose(compiled[1], reference[1], rtol=0.0, atol=1e-12)
+        if attitude_of is not None:
+            alone = inputs.imu_orientation(0, inputs.imu_attitude(quaternion, mount),
+                                           covariances[0], (True,) * 15, mount,
+                                           compiled=False)
+            np.testing.assert_allclose(compiled[0][state.ORIENTATION],
+                                       alone.z[state.ORIENTATION], rtol=0.0, atol=1e-12)
+        rates_only = inputs.imu_measurement(0, *compiled, (True,) * 15, state.TWIST, mount)
+        nan_entries = {i for i in range(15) if not math.isfinite(compiled[0][i])}
+        assert set(rates_only.indices) == set(range(state.VX, state.VYAW + 1)) - nan_entries
+        assert bool(nan_entries) == (seed % 3 == 0)
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_a_ukf_correction_drawing_its_points_equals_numpys(seed):
+    x, p, q, dt, measurement = random_case(seed)
+    assert_same(steps.ukf_correct(x, p, measurement, WEIGHTS, None),
+                steps.ukf_correct(x, p, measurement, WEIGHTS, None, compiled=False))

@@ -28,6 +28,8 @@ TWO_PI = 2.0 * math.pi
 _write_transfer = _jit(motion.write_transfer)
 _write_angle_derivatives = _jit(motion.write_angle_derivatives)
 _rpy_from_rotation = _jit(state.rpy_from_rotation)
+_rotation_from_quaternion = _jit(state.rotation_from_quaternion)
+_rotation_from_rpy = _jit(state.rotation_from_rpy)
 
 
 @_jit
@@ -334,6 +336,21 @@ def ukf_correct(x: FloatArray, p: FloatArray, points: FloatArray, z_full: FloatA
 
 
 @_jit
+def ukf_correct_drawn(x: FloatArray, p: FloatArray, z_full: FloatArray,
+                      covariance: FloatArray, idx: np.ndarray, min_variance: float,
+                      scale: float, w_mean: FloatArray, w_cov: FloatArray
+                      ) -> tuple[bool, float, FloatArray, FloatArray]:
+    """ukf_correct with sigma points drawn anew from (x, P) (``sigma_points``), in one call;
+    False where scale P has no Cholesky factor (x and P returned as they were)."""
+    drawn, points = sigma_points(x, p, scale)
+    if not drawn:
+        return False, 0.0, x, p
+    squared, x_new, p_new = ukf_correct(x, p, points, z_full, covariance, idx, min_variance,
+                                        w_mean, w_cov)
+    return True, squared, x_new, p_new
+
+
+@_jit
 def _cross(a: FloatArray, b: FloatArray) -> tuple[float, float, float]:
     return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
 
@@ -367,19 +384,45 @@ def _write_turned_covariance(rotation: FloatArray, covariance: FloatArray, out: 
 
 
 @_jit
-def twist_values(rotation: FloatArray, origin: FloatArray, linear: FloatArray,
-                 angular: FloatArray, covariance6: FloatArray, rates: FloatArray
-                 ) -> tuple[FloatArray, FloatArray]:
-    """inputs.twist's z and covariance: v = R linear + o x omega, omega' = R angular, and
-    R C R' (R on both halves) in the twist's block."""
-    z = np.zeros(N)
-    covariance = np.zeros((N, N))
+def _write_twist(rotation: FloatArray, origin: FloatArray, linear: FloatArray,
+                 angular: FloatArray, covariance6: FloatArray, rates: FloatArray,
+                 z: FloatArray, covariance: FloatArray) -> None:
+    """inputs.twist's values into the twist's entries of z and covariance: v = R linear + o
+    x omega, omega' = R angular, and R C R' (R on both halves)."""
     lever = _cross(origin, rates)
     for i in range(3):
         z[state.VX + i] = _turned(rotation, linear, i) + lever[i]
         z[state.VROLL + i] = _turned(rotation, angular, i)
     _write_turned_covariance(rotation, covariance6, covariance, state.VX)
+
+
+@_jit
+def twist_values(rotation: FloatArray, origin: FloatArray, linear: FloatArray,
+                 angular: FloatArray, covariance6: FloatArray, rates: FloatArray
+                 ) -> tuple[FloatArray, FloatArray]:
+    """inputs.twist's z and covariance (``_write_twist``)."""
+    z = np.zeros(N)
+    covariance = np.zeros((N, N))
+    _write_twist(rotation, origin, linear, angular, covariance6, rates, z, covariance)
     return z, covariance
+
+
+@_jit
+def _write_acceleration(rotation: FloatArray, origin: FloatArray, linear: FloatArray,
+                        covariance3: FloatArray, rates: FloatArray,
+                        angular_acceleration: FloatArray, attitude: FloatArray,
+                        gravity: float, z: FloatArray, covariance: FloatArray) -> None:
+    """inputs.acceleration's values into the acceleration's entries of z and covariance: a
+    = R (linear - attitude' (0, 0, g)) + o x alpha - (o x omega) x omega (g 0 to keep
+    gravity), and R C R'."""
+    felt = np.empty(3)
+    for i in range(3):
+        felt[i] = linear[i] - attitude[2, i] * gravity
+    tangential = _cross(origin, angular_acceleration)
+    centripetal = _cross(np.array(_cross(origin, rates)), rates)
+    for i in range(3):
+        z[state.AX + i] = _turned(rotation, felt, i) + tangential[i] - centripetal[i]
+    _write_turned_covariance(rotation, covariance3, covariance, state.AX)
 
 
 @_jit
@@ -387,31 +430,73 @@ def acceleration_values(rotation: FloatArray, origin: FloatArray, linear: FloatA
                         covariance3: FloatArray, rates: FloatArray,
                         angular_acceleration: FloatArray, attitude: FloatArray,
                         gravity: float) -> tuple[FloatArray, FloatArray]:
-    """inputs.acceleration's z and covariance: a = R (linear - attitude' (0, 0, g)) + o x
-    alpha - (o x omega) x omega (g 0 to keep gravity), and R C R' in the acceleration's
-    block."""
-    felt = np.empty(3)
-    for i in range(3):
-        felt[i] = linear[i] - attitude[2, i] * gravity
-    tangential = _cross(origin, angular_acceleration)
-    centripetal = _cross(np.array(_cross(origin, rates)), rates)
+    """inputs.acceleration's z and covariance (``_write_acceleration``)."""
     z = np.zeros(N)
     covariance = np.zeros((N, N))
-    for i in range(3):
-        z[state.AX + i] = _turned(rotation, felt, i) + tangential[i] - centripetal[i]
-    _write_turned_covariance(rotation, covariance3, covariance, state.AX)
+    _write_acceleration(rotation, origin, linear, covariance3, rates, angular_acceleration,
+                        attitude, gravity, z, covariance)
     return z, covariance
+
+
+@_jit
+def _write_orientation(attitude: FloatArray, turn: FloatArray, covariance3: FloatArray,
+                       z: FloatArray, covariance: FloatArray) -> None:
+    """inputs.imu_orientation's values into the orientation's entries of z and covariance:
+    the attitude's roll, pitch and yaw, and T C T' (T the mount's yaw)."""
+    z[state.ROLL], z[state.PITCH], z[state.YAW] = _rpy_from_rotation(attitude)
+    _write_turned_covariance(turn, covariance3, covariance, state.ROLL)
 
 
 @_jit
 def orientation_values(attitude: FloatArray, turn: FloatArray, covariance3: FloatArray
                        ) -> tuple[FloatArray, FloatArray]:
-    """inputs.imu_orientation's z and covariance: the attitude's roll, pitch and yaw, and
-    T C T' (T the mount's yaw) in the orientation's block."""
+    """inputs.imu_orientation's z and covariance (``_write_orientation``)."""
     z = np.zeros(N)
     covariance = np.zeros((N, N))
-    z[state.ROLL], z[state.PITCH], z[state.YAW] = _rpy_from_rotation(attitude)
-    _write_turned_covariance(turn, covariance3, covariance, state.ROLL)
+    _write_orientation(attitude, turn, covariance3, z, covariance)
+    return z, covariance
+
+
+@_jit
+def _imu_attitude(quaternion: FloatArray, mount_rpy: FloatArray, turn: FloatArray
+                  ) -> FloatArray:
+    """inputs.imu_attitude: the reported attitude's angles less the mount's, the roll /
+    pitch pair turned by the mount's yaw ``turn``."""
+    angles = _rpy_from_rotation(_rotation_from_quaternion(
+        quaternion[0], quaternion[1], quaternion[2], quaternion[3]))
+    offsets = np.empty(3)
+    for i in range(3):
+        offsets[i] = _wrap(angles[i] - mount_rpy[i])
+    turned = np.empty(3)
+    for i in range(3):
+        turned[i] = turn[i, 0] * offsets[0] + turn[i, 1] * offsets[1] + \
+            turn[i, 2] * offsets[2]
+    return _rotation_from_rpy(turned[0], turned[1], turned[2])
+
+
+@_jit
+def imu_values(quaternion: FloatArray, mount_rpy: FloatArray, turn: FloatArray,
+               orientation_covariance: FloatArray, with_orientation: bool,
+               rotation: FloatArray, origin: FloatArray, angular: FloatArray,
+               angular_covariance: FloatArray, linear: FloatArray,
+               linear_covariance: FloatArray, rates: FloatArray,
+               angular_acceleration: FloatArray, gravity_attitude: FloatArray,
+               gravity: float) -> tuple[FloatArray, FloatArray]:
+    """An IMU reading's three parts at once, each in its own entries of one z and one
+    covariance (their blocks do not overlap): the attitude as inputs.imu_orientation
+    takes ``imu_attitude`` (skipped when ``with_orientation`` is False: the reading has
+    none), the angular velocity as inputs.twist (no linear part), the linear
+    acceleration as inputs.acceleration."""
+    z = np.zeros(N)
+    covariance = np.zeros((N, N))
+    if with_orientation:
+        _write_orientation(_imu_attitude(quaternion, mount_rpy, turn), turn,
+                           orientation_covariance, z, covariance)
+    twist6 = np.zeros((6, 6))
+    twist6[3:, 3:] = angular_covariance
+    _write_twist(rotation, origin, np.zeros(3), angular, twist6, rates, z, covariance)
+    _write_acceleration(rotation, origin, linear, linear_covariance, rates,
+                        angular_acceleration, gravity_attitude, gravity, z, covariance)
     return z, covariance
 
 
@@ -426,9 +511,11 @@ def warm_up() -> None:
     ekf_predict(x, p, p, 0.01)
     ekf_correct(x, p, x, p, idx, 1e-9)
     _, _, _, points = ukf_predict(x, p, p, 0.01, 1.0, weights, weights)
-    sigma_points(x, p, 1.0)
     ukf_correct(x, p, points, x, p, idx, 1e-9, weights, weights)
+    ukf_correct_drawn(x, p, x, p, idx, 1e-9, 1.0, weights, weights)
     three, rotation = np.zeros(3), np.eye(3)
     twist_values(rotation, three, three, three, np.eye(6), three)
     acceleration_values(rotation, three, three, rotation, three, three, rotation, 9.8)
     orientation_values(rotation, rotation, rotation)
+    imu_values(np.array([0.0, 0.0, 0.0, 1.0]), three, rotation, rotation, True, rotation,
+               three, three, rotation, three, rotation, three, three, rotation, 9.8)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimation_nodes.core.fusion.state import (
-    ACCELERATION, AX, AZ, ORIENTATION, PITCH, POSE, ROLL, STATE_SIZE, TWIST, VPITCH, VROLL,
+    ACCELERATION, AZ, ORIENTATION, PITCH, POSE, ROLL, STATE_SIZE, TWIST, VPITCH, VROLL,
     VX, VZ, X, Z, rotation_from_quaternion, rotation_from_rpy, rpy_from_rotation, wrap)
 from estimation_nodes.core.fusion import steps
 from estimation_nodes.core.fusion.steps import Measurement, c_doubles
@@ -89,6 +89,19 @@ class Mount:
             known[mask] = [bool(length >= 1e-6) for length in lengths]
         return list(known[mask])
 
+    def measured(self, update: tuple[bool, ...], part: slice) -> tuple[int, ...]:
+        """The state entries of ``part`` (a pose or a twist, two blocks of three, or one
+        block) that ``update`` measures once the rotation has turned each block: the
+        same for every message of a sensor, so made once per mask and part."""
+        known = self.__dict__.setdefault("_measured", {})
+        key = (update, part.start, part.stop)
+        if key not in known:
+            mask = list(update)
+            for start in range(part.start, part.stop, 3):
+                mask[start:start + 3] = self.masked(tuple(update[start:start + 3]))
+            known[key] = tuple(i for i in range(part.start, part.stop) if mask[i])
+        return known[key]
+
     @classmethod
     def from_rpy(cls, xyz: tuple[float, float, float], rpy: tuple[float, float, float]
                  ) -> "Mount":
@@ -105,10 +118,13 @@ class Mount:
 IDENTITY = Mount()
 
 
-def _measurement(stamp_ns: int, z: FloatArray, covariance: FloatArray, mask: list[bool],
-                 threshold: float, source: str) -> Measurement | None:
+def _measurement(stamp_ns: int, z: FloatArray, covariance: FloatArray,
+                 candidates: tuple[int, ...], threshold: float, source: str
+                 ) -> Measurement | None:
+    """The measurement of the ``candidates`` entries whose value is finite (a sensor's NaN
+    leaves its entry unmeasured), None when none is."""
     values = z.tolist()
-    indices = tuple(i for i in range(STATE_SIZE) if mask[i] and math.isfinite(values[i]))
+    indices = tuple(i for i in candidates if math.isfinite(values[i]))
     if not indices:
         return None
     return Measurement(stamp_ns, z, covariance, indices, threshold, source)
@@ -122,6 +138,18 @@ def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
     return np.array([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0])
 
 
+def _twist_numpy(linear: FloatArray, angular: FloatArray, covariance6: FloatArray,
+                 state_rates: FloatArray, mount: Mount) -> tuple[FloatArray, FloatArray]:
+    r = mount.rotation
+    z = np.zeros(STATE_SIZE)
+    z[VX:VX + 3] = r @ linear + _cross(mount.origin, state_rates)
+    z[VROLL:VROLL + 3] = r @ angular
+    covariance = np.zeros((STATE_SIZE, STATE_SIZE))
+    rot6 = mount.six
+    covariance[TWIST, TWIST] = rot6 @ covariance6 @ rot6.T
+    return z, covariance
+
+
 def twist(stamp_ns: int, linear: FloatArray, angular: FloatArray, covariance6: FloatArray,
           update: tuple[bool, ...], state_rates: FloatArray, mount: Mount = IDENTITY,
           threshold: float = math.inf, source: str = "", compiled: bool = True
@@ -133,16 +161,9 @@ def twist(stamp_ns: int, linear: FloatArray, angular: FloatArray, covariance6: F
         z, covariance = kernels.twist_values(*map(c_doubles, (
             r, mount.origin, linear, angular, covariance6, state_rates)))
     else:
-        z = np.zeros(STATE_SIZE)
-        z[VX:VX + 3] = r @ linear + _cross(mount.origin, state_rates)
-        z[VROLL:VROLL + 3] = r @ angular
-        covariance = np.zeros((STATE_SIZE, STATE_SIZE))
-        rot6 = mount.six
-        covariance[TWIST, TWIST] = rot6 @ covariance6 @ rot6.T
-    mask = list(update)
-    mask[VX:VX + 3] = mount.masked(tuple(update[VX:VX + 3]))
-    mask[VROLL:VROLL + 3] = mount.masked(tuple(update[VROLL:VROLL + 3]))
-    return _measurement(stamp_ns, z, covariance, _only(mask, TWIST), threshold, source)
+        z, covariance = _twist_numpy(linear, angular, covariance6, state_rates, mount)
+    return _measurement(stamp_ns, z, covariance, mount.measured(update, TWIST), threshold,
+                        source)
 
 
 def pose(stamp_ns: int, body: Mount, covariance6: FloatArray, update: tuple[bool, ...],
@@ -158,10 +179,8 @@ def pose(stamp_ns: int, body: Mount, covariance6: FloatArray, update: tuple[bool
     rot6 = frame.six
     covariance = np.zeros((STATE_SIZE, STATE_SIZE))
     covariance[POSE, POSE] = rot6 @ covariance6 @ rot6.T
-    mask = list(update)
-    mask[X:X + 3] = frame.masked(tuple(update[X:X + 3]))
-    mask[ROLL:ROLL + 3] = frame.masked(tuple(update[ROLL:ROLL + 3]))
-    return _measurement(stamp_ns, z, covariance, _only(mask, POSE), threshold, source)
+    return _measurement(stamp_ns, z, covariance, frame.measured(update, POSE), threshold,
+                        source)
 
 
 def pose_change(stamp_ns: int, previous: Mount, current: Mount, dt: float,
@@ -201,6 +220,15 @@ def imu_attitude(quaternion: tuple[float, float, float, float], mount: Mount) ->
     return rotation_from_rpy(*turned)
 
 
+def _orientation_numpy(attitude: FloatArray, covariance3: FloatArray, turn: Mount
+                       ) -> tuple[FloatArray, FloatArray]:
+    z = np.zeros(STATE_SIZE)
+    z[ROLL:ROLL + 3] = rpy_from_rotation(attitude)
+    covariance = np.zeros((STATE_SIZE, STATE_SIZE))
+    covariance[ORIENTATION, ORIENTATION] = turn.rotation @ covariance3 @ turn.rotation.T
+    return z, covariance
+
+
 def imu_orientation(stamp_ns: int, attitude: FloatArray, covariance3: FloatArray,
                     update: tuple[bool, ...], mount: Mount = IDENTITY,
                     threshold: float = math.inf, source: str = "", compiled: bool = True
@@ -214,13 +242,24 @@ def imu_orientation(stamp_ns: int, attitude: FloatArray, covariance3: FloatArray
         z, covariance = kernels.orientation_values(*map(c_doubles, (
             attitude, turn.rotation, covariance3)))
     else:
-        z = np.zeros(STATE_SIZE)
-        z[ROLL:ROLL + 3] = rpy_from_rotation(attitude)
-        covariance = np.zeros((STATE_SIZE, STATE_SIZE))
-        covariance[ORIENTATION, ORIENTATION] = turn.rotation @ covariance3 @ turn.rotation.T
-    mask = list(update)
-    mask[ROLL:ROLL + 3] = turn.masked(tuple(update[ROLL:ROLL + 3]))
-    return _measurement(stamp_ns, z, covariance, _only(mask, ORIENTATION), threshold, source)
+        z, covariance = _orientation_numpy(attitude, covariance3, turn)
+    return _measurement(stamp_ns, z, covariance, turn.measured(update, ORIENTATION),
+                        threshold, source)
+
+
+def _acceleration_numpy(linear: FloatArray, covariance3: FloatArray, state_rates: FloatArray,
+                        angular_acceleration: FloatArray, seen_from: FloatArray | None,
+                        gravity: float, mount: Mount) -> tuple[FloatArray, FloatArray]:
+    r, o = mount.rotation, mount.origin
+    if seen_from is not None:
+        linear = linear - seen_from.T @ np.array([0.0, 0.0, gravity])
+    a = r @ linear + _cross(o, angular_acceleration) \
+        - _cross(_cross(o, state_rates), state_rates)
+    z = np.zeros(STATE_SIZE)
+    z[ACCELERATION] = a
+    covariance = np.zeros((STATE_SIZE, STATE_SIZE))
+    covariance[ACCELERATION, ACCELERATION] = r @ covariance3 @ r.T
+    return z, covariance
 
 
 def acceleration(stamp_ns: int, linear: FloatArray, covariance3: FloatArray,
@@ -245,17 +284,60 @@ def acceleration(stamp_ns: int, linear: FloatArray, covariance3: FloatArray,
                              r if seen_from is None else seen_from)),
             0.0 if seen_from is None else gravity)
     else:
-        if seen_from is not None:
-            linear = linear - seen_from.T @ np.array([0.0, 0.0, gravity])
-        a = r @ linear + _cross(o, angular_acceleration) \
-            - _cross(_cross(o, state_rates), state_rates)
-        z = np.zeros(STATE_SIZE)
-        z[ACCELERATION] = a
-        covariance = np.zeros((STATE_SIZE, STATE_SIZE))
-        covariance[ACCELERATION, ACCELERATION] = r @ covariance3 @ r.T
-    mask = list(update)
-    mask[AX:AX + 3] = mount.masked(tuple(update[AX:AX + 3]))
-    return _measurement(stamp_ns, z, covariance, _only(mask, ACCELERATION), threshold, source)
+        z, covariance = _acceleration_numpy(linear, covariance3, state_rates,
+                                            angular_acceleration, seen_from, gravity, mount)
+    return _measurement(stamp_ns, z, covariance, mount.measured(update, ACCELERATION),
+                        threshold, source)
+
+
+def imu_values(quaternion: tuple[float, float, float, float] | None,
+               orientation_covariance: FloatArray, angular: FloatArray,
+               angular_covariance: FloatArray, linear: FloatArray,
+               linear_covariance: FloatArray, state_rates: FloatArray,
+               angular_acceleration: FloatArray, gravity_attitude: FloatArray | None,
+               gravity: float = GRAVITY, mount: Mount = IDENTITY, compiled: bool = True
+               ) -> tuple[FloatArray, FloatArray]:
+    """One IMU reading's three parts in one z and one 15 x 15 covariance, each in its own
+    entries (the orientation's, the angular rates', the linear acceleration's), as
+    ``imu_orientation`` of ``imu_attitude``, ``twist`` with no linear part and
+    ``acceleration`` make them: one computation for the three, the measurements then
+    sharing the arrays (each reads only its entries). ``quaternion`` None: no attitude
+    (the reading has none, or it is taken another way); ``gravity_attitude`` as
+    ``acceleration``'s ``attitude`` when gravity is to be taken off, None to keep it."""
+    kernels = steps.kernels(compiled)
+    turn = mount.yaw_turn
+    if kernels is not None:
+        return kernels.imu_values(
+            np.array(quaternion or (0.0, 0.0, 0.0, 1.0)), np.array(mount.rpy),
+            turn.rotation, c_doubles(orientation_covariance), quaternion is not None,
+            mount.rotation, mount.origin, *map(c_doubles, (
+                angular, angular_covariance, linear, linear_covariance, state_rates,
+                angular_acceleration,
+                mount.rotation if gravity_attitude is None else gravity_attitude)),
+            0.0 if gravity_attitude is None else gravity)
+    twist6 = np.zeros((6, 6))
+    twist6[3:, 3:] = angular_covariance
+    z, covariance = _twist_numpy(np.zeros(3), angular, twist6, state_rates, mount)
+    parts = [(ACCELERATION, _acceleration_numpy(linear, linear_covariance, state_rates,
+                                                angular_acceleration, gravity_attitude,
+                                                gravity, mount))]
+    if quaternion is not None:
+        parts.append((ORIENTATION, _orientation_numpy(imu_attitude(quaternion, mount),
+                                                      orientation_covariance, turn)))
+    for part, (part_z, part_covariance) in parts:
+        z[part] = part_z[part]
+        covariance[part, part] = part_covariance[part, part]
+    return z, covariance
+
+
+def imu_measurement(stamp_ns: int, z: FloatArray, covariance: FloatArray,
+                    update: tuple[bool, ...], part: slice, turn: Mount,
+                    threshold: float = math.inf, source: str = "") -> Measurement | None:
+    """The measurement of ``part`` (ORIENTATION, TWIST or ACCELERATION) of ``imu_values``'
+    z and covariance: the entries ``update`` asks for, turned by ``turn`` (the mount's
+    ``yaw_turn`` for the orientation, the mount itself for the others)."""
+    return _measurement(stamp_ns, z, covariance, turn.measured(update, part), threshold,
+                        source)
 
 
 def force_two_d(measurement: Measurement) -> Measurement:
@@ -275,8 +357,3 @@ def force_two_d(measurement: Measurement) -> Measurement:
     indices = tuple(sorted(set(measurement.indices).union(PLANAR_ZEROS)))
     return Measurement(measurement.stamp_ns, z, covariance, indices, measurement.threshold,
                        measurement.source)
-
-
-def _only(mask: list[bool], part: slice) -> list[bool]:
-    """The mask with every entry outside ``part`` off (a message feeds one part per call)."""
-    return [False] * part.start + mask[part] + [False] * (len(mask) - part.stop)

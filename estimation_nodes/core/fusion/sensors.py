@@ -28,8 +28,8 @@ import numpy as np
 from estimation_nodes.core.fusion import inputs
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
-from estimation_nodes.core.fusion.state import ORIENTATION, POSE, ROLL, TWIST, VROLL, \
-    rotation_from_quaternion, rotation_from_rpy
+from estimation_nodes.core.fusion.state import ACCELERATION, ORIENTATION, POSE, ROLL, TWIST, \
+    VROLL, rotation_from_quaternion, rotation_from_rpy
 from estimation_nodes.core.fusion.steps import Measurement, covariance_problem
 from estimation_nodes.core.validation import FloatArray
 
@@ -51,18 +51,32 @@ class SensorConfig:
     differential: bool = False
     queue_size: int = 10
 
-    @property
+    # What follows from the configuration alone is worked out once (a frozen dataclass
+    # keeps a cached_property in its __dict__): every message asks it.
+
+    @functools.cached_property
     def pose_part(self) -> str:
         """The name the peer gives the pose part's measurements."""
         return f"{self.name}_pose" if self.kind == "odom" else self.name
 
-    @property
+    @functools.cached_property
     def measures_pose(self) -> bool:
         return self.kind in ("odom", "pose") and any(self.update[POSE])
 
-    @property
+    @functools.cached_property
     def measures_twist(self) -> bool:
         return self.kind in ("odom", "twist") and any(self.update[TWIST])
+
+    @functools.cached_property
+    def imu_parts(self) -> tuple[bool, bool, bool]:
+        """Whether an IMU's attitude, angular rates and linear acceleration are asked for."""
+        return (any(self.update[ORIENTATION]), any(self.update[VROLL:VROLL + 3]),
+                any(self.update[ACCELERATION]))
+
+    @functools.cached_property
+    def rate_entries(self) -> tuple[bool, ...]:
+        """The update mask of an IMU's rates part: an IMU has no linear velocity."""
+        return _entries(self.update, VROLL, VROLL + 3)
 
 
 #: The name ``set_pose`` goes by in the counts.
@@ -223,7 +237,7 @@ class SensorInputs:
             # The peer's reading of an unset orientation: no rotation.
             quaternion = (0.0, 0.0, 0.0, 1.0)
         return (Mount(rotation_from_quaternion(*quaternion), position),
-                np.asarray(msg.pose.covariance, dtype=float).reshape(6, 6))
+                _matrix(msg.pose.covariance, 6))
 
     def _place(self, part: str, frame_id: str) -> Mount | None:
         frame = self.placement(frame_id)
@@ -259,51 +273,63 @@ class SensorInputs:
         if not (self._newer(part, stamp) and self._finite(part, msg.twist.covariance)):
             return []
         t = msg.twist.twist
-        covariance = np.asarray(msg.twist.covariance, dtype=float).reshape(6, 6)
+        covariance = _matrix(msg.twist.covariance, 6)
         made = inputs.twist(
             stamp, _vector(t.linear), _vector(t.angular), covariance, sensor.update,
             fusion.x[VROLL:VROLL + 3], mount, sensor.twist_threshold, part)
         return [made] if made else []
 
     def _imu(self, sensor: SensorConfig, msg, fusion: FusionFilter) -> list[Measurement]:
+        """The parts of an IMU reading its ``_config`` asks for, made at once
+        (``inputs.imu_values``); an attitude taken ``_relative`` or ``_differential`` the
+        pose inputs' way (``_imu_attitude``)."""
         stamp = stamp_ns(msg.header)
         mount = self.mount(msg.header.frame_id)
         if mount is None:
             self.drop(f"{sensor.name}: no transform from {msg.header.frame_id!r} "
                       f"to {self.base_frame!r}")
             return []
-        made: list[Measurement | None] = []
-        has_orientation = abs(msg.orientation_covariance[0] + 1.0) >= 1e-9
+        names = _imu_parts(sensor.name)
+        update = sensor.update
+        asks_attitude, asks_rates, asks_acceleration = sensor.imu_parts
+        has_orientation = _present(msg.orientation_covariance)
         q = msg.orientation
         quaternion = (q.x, q.y, q.z, q.w)
-        if any(sensor.update[POSE.start + 3:POSE.stop]) and has_orientation \
-                and self._newer(f"{sensor.name}_pose", stamp) \
-                and self._finite(f"{sensor.name}_pose", msg.orientation_covariance):
+        attitude = asks_attitude and has_orientation \
+            and self._newer(names.pose, stamp) \
+            and self._finite(names.pose, msg.orientation_covariance)
+        rates = asks_rates and _present(msg.angular_velocity_covariance) \
+            and self._newer(names.twist, stamp) \
+            and self._finite(names.twist, msg.angular_velocity_covariance)
+        acceleration = asks_acceleration and _present(msg.linear_acceleration_covariance) \
+            and self._newer(names.acceleration, stamp) \
+            and self._finite(names.acceleration, msg.linear_acceleration_covariance)
+        if not (attitude or rates or acceleration):
+            return []
+        plain_attitude = attitude and not (sensor.relative or sensor.differential)
+        z, covariance = inputs.imu_values(
+            quaternion if plain_attitude else None, _matrix3(msg.orientation_covariance),
+            _vector(msg.angular_velocity), _matrix3(msg.angular_velocity_covariance),
+            _vector(msg.linear_acceleration), _matrix3(msg.linear_acceleration_covariance),
+            fusion.x[VROLL:VROLL + 3], fusion.angular_acceleration,
+            self._attitude(sensor, has_orientation, quaternion, mount, fusion)
+            if acceleration and sensor.remove_gravity else None, self.gravity, mount)
+        made: list[Measurement | None] = []
+        if plain_attitude:
+            made.append(inputs.imu_measurement(stamp, z, covariance, update, ORIENTATION,
+                                               mount.yaw_turn, sensor.pose_threshold,
+                                               names.pose))
+        elif attitude:
             made.append(self._imu_attitude(sensor, stamp, quaternion,
                                            _matrix3(msg.orientation_covariance), mount))
-        if any(sensor.update[VROLL:VROLL + 3]) \
-                and abs(msg.angular_velocity_covariance[0] + 1.0) >= 1e-9 \
-                and self._newer(f"{sensor.name}_twist", stamp) \
-                and self._finite(f"{sensor.name}_twist", msg.angular_velocity_covariance):
-            covariance = np.zeros((6, 6))
-            covariance[3:, 3:] = _matrix3(msg.angular_velocity_covariance)
-            made.append(inputs.twist(
-                stamp, np.zeros(3), _vector(msg.angular_velocity), covariance,
-                _entries(sensor.update, VROLL, VROLL + 3), fusion.x[VROLL:VROLL + 3],
-                mount,
-                sensor.twist_threshold, f"{sensor.name}_twist"))
-        if any(sensor.update[12:15]) \
-                and abs(msg.linear_acceleration_covariance[0] + 1.0) >= 1e-9 \
-                and self._newer(f"{sensor.name}_acceleration", stamp) \
-                and self._finite(f"{sensor.name}_acceleration",
-                                 msg.linear_acceleration_covariance):
-            made.append(inputs.acceleration(
-                stamp, _vector(msg.linear_acceleration),
-                _matrix3(msg.linear_acceleration_covariance), sensor.update,
-                fusion.x[VROLL:VROLL + 3], fusion.angular_acceleration,
-                self._attitude(sensor, has_orientation, quaternion, mount, fusion),
-                sensor.remove_gravity, self.gravity, mount, sensor.acceleration_threshold,
-                f"{sensor.name}_acceleration"))
+        if rates:
+            made.append(inputs.imu_measurement(
+                stamp, z, covariance, sensor.rate_entries, TWIST, mount,
+                sensor.twist_threshold, names.twist))
+        if acceleration:
+            made.append(inputs.imu_measurement(stamp, z, covariance, update, ACCELERATION,
+                                               mount, sensor.acceleration_threshold,
+                                               names.acceleration))
         return [m for m in made if m is not None]
 
     def _imu_attitude(self, sensor: SensorConfig, stamp: int, quaternion, covariance3: FloatArray,
@@ -332,12 +358,38 @@ class SensorInputs:
         return reported @ mount.rotation if sensor.relative else reported
 
 
+def _present(covariance) -> bool:
+    """Whether an IMU message has the part of this covariance (-1 first: it has not)."""
+    return abs(float(covariance[0]) + 1.0) >= 1e-9
+
+
 def _vector(v) -> np.ndarray:
     return np.array([v.x, v.y, v.z], dtype=float)
 
 
 def _matrix3(values) -> np.ndarray:
-    return np.asarray(values, dtype=float).reshape(3, 3)
+    return _matrix(values, 3)
+
+
+def _matrix(values, size: int) -> np.ndarray:
+    """A message's covariance as an array of its own: a bag reader's arrays are views of
+    the read-only file buffer, and numba compiles a kernel anew for read-only arguments
+    (a second version of each, at the first reading, that warm_up does not make)."""
+    return np.array(values, dtype=float).reshape(size, size)
+
+
+@dataclass(frozen=True)
+class _ImuParts:
+    """The names an IMU input's parts go by in the counts (the peer's)."""
+
+    pose: str
+    twist: str
+    acceleration: str
+
+
+@functools.cache
+def _imu_parts(name: str) -> _ImuParts:
+    return _ImuParts(f"{name}_pose", f"{name}_twist", f"{name}_acceleration")
 
 
 @functools.cache

@@ -72,12 +72,17 @@ class Measurement:
     #: Where it came from ("odom0_twist", ...), for diagnostics.
     source: str = ""
 
-    #: ``indices`` as the kernels take them (made once: the check and the correction both
-    #: read them).
+    #: ``indices`` as the kernels take them (one array per set of indices, shared by the
+    #: measurements that have it: never changed in place).
     index_array: np.ndarray = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "index_array", np.array(self.indices, dtype=np.int64))
+        object.__setattr__(self, "index_array", _index_array(self.indices))
+
+
+@functools.cache
+def _index_array(indices: tuple[int, ...]) -> np.ndarray:
+    return np.array(indices, dtype=np.int64)
 
 
 class Rejected(Exception):
@@ -286,9 +291,14 @@ def ukf_correct(x: FloatArray, p: FloatArray, measurement: Measurement,
         return ukf_correct_numpy(x, p, measurement, weights, points)
     x, p = c_doubles(x), c_doubles(p)
     if points is None:
-        drawn, points = compiled_steps.sigma_points(x, p, STATE_SIZE + weights.lam)
-        if not drawn:
-            points = sigma_points(x, p, weights)
+        drawn, squared, x_new, p_new = compiled_steps.ukf_correct_drawn(
+            x, p, c_doubles(measurement.z), c_doubles(measurement.covariance),
+            measurement.index_array, MIN_VARIANCE, STATE_SIZE + weights.lam, weights.mean,
+            weights.covariance)
+        if drawn:
+            _reject_beyond(squared, measurement.threshold)
+            return x_new, p_new
+        points = sigma_points(x, p, weights)
     squared, x_new, p_new = compiled_steps.ukf_correct(
         x, p, c_doubles(points), c_doubles(measurement.z), c_doubles(measurement.covariance),
         measurement.index_array, MIN_VARIANCE, weights.mean, weights.covariance)

@@ -4,6 +4,7 @@ writes, so that estimation_play, estimation_replay, ros2 bag and Foxglove read i
     estimation_import carmen LOG -o run.mcap [--range-max M] [--scan-rate HZ]
                              [--laser-ahead M]
     estimation_import utias DATASET_DIR --robot N -o run.mcap [--landmarks-file FILE]
+    estimation_import rosbag BAG -o run.mcap [--topics /imu/data /odom ...]
 
 CARMEN (FLASER or ROBOTLASER1 scans): /scan (sensor_msgs/LaserScan with the log's
 angles, range_max and remissions as intensities, frame ``laser``), /odom
@@ -15,7 +16,9 @@ the tf tree a robot records (/tf: ``odom`` -> ``base_link`` at every odometry li
 raw log, see ``carmen``). UTIAS: /odom (the twist, and the pose it dead-reckons),
 /landmark_observations (sensor_msgs/PointCloud2, one per camera frame: x = range
 cos(bearing), y = range sin(bearing), z = 0, id = the landmark's subject number),
-/ground_truth (Vicon), and a landmarks file (YAML).
+/ground_truth (Vicon), and a landmarks file (YAML). rosbag (a ROS 1 ``.bag`` or a rosbag2
+folder, MCAP or sqlite3, read through ``rosbags``): every message as this ROS 2's type at
+its receive time, a topic whose type is not installed here left out and said.
 Every message is stamped with the log's time (CARMEN: with ``--scan-rate``, the scans at
 that rate in the log's order and the odometry evenly between them, for a log whose times
 do not advance). What was left out is counted and reported; a log that cannot be read is
@@ -195,6 +198,33 @@ def import_utias(directory: Path, robot: int, out: Path,
     return _report(writer.counts, run.left_out, [f"landmarks written to {target}"])
 
 
+def import_rosbag(bag: Path, out: Path, topics: set[str] | None) -> list[str]:
+    """A robot's bag (ROS 1, or a rosbag2 folder) as one of the package's recordings: each
+    message as this ROS 2's type (tools/recording/bags.py), at its receive time; topics of
+    types not installed here left out and said."""
+    from rclpy.serialization import serialize_message
+
+    from estimation_nodes.tools.recording.bags import bag_messages, is_bag
+
+    if not is_bag(bag):
+        raise RecordingError(f"{bag}: not a ROS 1 bag (.bag) or a rosbag2 folder "
+                             f"(metadata.yaml)")
+    left_out: dict[str, str] = {}
+    messages = list(bag_messages(bag, topics, left_out=left_out))
+    if not messages:
+        raise RecordingError(f"{bag}: no message on the topics asked for")
+    writer = McapRunWriter(out, {topic: type_name for _, topic, type_name, _ in messages},
+                           {"source": str(bag)})
+    counts: Counter[str] = Counter()
+    for stamp, topic, _, msg in messages:
+        writer.write(topic, serialize_message(msg), stamp, stamp)
+        counts[topic] += 1
+    writer.close()
+    notes = [f"{topic} left out: its type {type_name} is not installed here"
+             for topic, type_name in sorted(left_out.items())]
+    return _report(counts, Counter(), notes)
+
+
 def _dead_reckoned(pose, twist, dt: float):
     from estimation_nodes.core.kalman.unicycle import move
 
@@ -240,7 +270,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     u.add_argument("--robot", type=int, required=True)
     u.add_argument("--landmarks-file", type=Path,
                    help="where to write the landmarks (default: OUT.landmarks.yaml)")
-    for sub in (c, u):
+    r = kinds.add_parser("rosbag", help="a robot's bag: ROS 1 (.bag) or a rosbag2 folder "
+                                        "(MCAP or sqlite3)")
+    r.add_argument("bag", type=Path)
+    r.add_argument("--topics", nargs="+", metavar="TOPIC",
+                   help="only these topics (default: every topic of an installed type)")
+    for sub in (c, u, r):
         sub.add_argument("-o", "--output", type=Path, required=True, metavar="FILE.mcap")
     args = parser.parse_args(argv)
     if args.kind == "carmen" and args.range_max is not None \
@@ -260,6 +295,10 @@ def main(argv: Sequence[str] | None = None) -> None:
         if args.kind == "carmen":
             lines = import_carmen(args.log, args.output, args.range_max, args.scan_rate,
                                   args.laser_ahead)
+        elif args.kind == "rosbag":
+            topics = {t if t.startswith("/") else f"/{t}" for t in args.topics} \
+                if args.topics else None
+            lines = import_rosbag(args.bag, args.output, topics)
         else:
             lines = import_utias(args.dataset, args.robot, args.output, args.landmarks_file)
     except (carmen.LogError, utias.DatasetError, RecordingError) as error:

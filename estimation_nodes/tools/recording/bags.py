@@ -64,14 +64,17 @@ def _with_msg(element: str) -> str:
     return f"{package}/msg/{name}"
 
 
-def bag_messages(path: Path, topics: set[str] | None = None, as_rclpy: bool = True
+def bag_messages(path: Path, topics: set[str] | None = None, as_rclpy: bool = True,
+                 left_out: dict[str, str] | None = None
                  ) -> Iterator[tuple[int, str, str, Any]]:
     """(receive time ns, topic, ROS 2 type name, rclpy message) in recorded order.
 
-    With ``as_rclpy`` False, each message as ``rosbags`` decoded it: the same field names
-    and values (and a ROS 1 message's extra fields), for a reader that reads fields by
-    name and never publishes, which then skips the copy into rclpy's classes, the most
-    costly part of reading (estimation_fuse)."""
+    A topic whose type this install lacks (a robot's own messages) is left out, not the
+    bag: noted in ``left_out`` (topic -> type) where given. With ``as_rclpy`` False, each
+    message as ``rosbags`` decoded it: the same field names and values (and a ROS 1
+    message's extra fields), for a reader that reads fields by name and never publishes,
+    which then skips the copy into rclpy's classes, the most costly part of reading
+    (estimation_fuse)."""
     try:
         from rosbags.highlevel import AnyReader
     except ImportError:
@@ -81,8 +84,9 @@ def bag_messages(path: Path, topics: set[str] | None = None, as_rclpy: bool = Tr
         with AnyReader([path]) as reader:
             connections = [c for c in reader.connections
                            if topics is None or c.topic in topics]
-            classes = {c.msgtype: rclpy_class(c.msgtype) for c in connections} \
-                if as_rclpy else {}
+            classes = _installed_classes(connections, left_out) if as_rclpy else {}
+            if as_rclpy:
+                connections = [c for c in connections if c.msgtype in classes]
             for connection, timestamp, raw in reader.messages(connections=connections):
                 decoded = reader.deserialize(raw, connection.msgtype)
                 yield (timestamp, connection.topic, connection.msgtype,
@@ -92,3 +96,17 @@ def bag_messages(path: Path, topics: set[str] | None = None, as_rclpy: bool = Tr
         raise
     except Exception as error:  # rosbags' own errors: a file that is not a bag it reads
         raise RecordingError(f"{path} is not a bag rosbags can read: {error}") from None
+
+
+def _installed_classes(connections: list, left_out: dict[str, str] | None) -> dict[str, type]:
+    """The rclpy class of each connection's type that this install has; the others'
+    topics noted in ``left_out``."""
+    classes = {}
+    for connection in connections:
+        try:
+            classes[connection.msgtype] = rclpy_class(connection.msgtype)
+        except RecordingError:
+            if left_out is not None:
+                left_out[connection.topic] = connection.msgtype
+    return classes
+

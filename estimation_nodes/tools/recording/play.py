@@ -95,8 +95,13 @@ def _read_bag(path: Path, only: set[str] | None) -> list[Recorded]:
 
     if not path.exists():
         raise RecordingError(f"{path}: no such bag")
-    return [Recorded(stamp, topic, type_name, serialize_message(msg))
-            for stamp, topic, type_name, msg in bag_messages(path, only)]
+    left_out: dict[str, str] = {}
+    messages = [Recorded(stamp, topic, type_name, serialize_message(msg))
+                for stamp, topic, type_name, msg in bag_messages(path, only, left_out=left_out)]
+    for topic, type_name in sorted(left_out.items()):
+        print(f"estimation_play: {topic} left out: its type {type_name} is not installed "
+              f"here", file=sys.stderr)
+    return messages
 
 
 def qos_for(type_name: str, topic: str = ""):
