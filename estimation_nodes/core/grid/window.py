@@ -354,6 +354,24 @@ class LatticeWeights:
                 self.unscored_peak - peak)
 
 
+#: The lattice parts' cells of the maps in use: (free, phase) -> their rows and columns.
+_lattice_lists: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def _lattice_list(model: GridModel, phase: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rows and columns (of the grid) of ``lattice_cells(model, phase)``: made once
+    per map and part, not at every update."""
+    key = (id(model.free), phase % KIDNAP_PHASES)
+    cached = _lattice_lists.get(key)
+    if cached is None or cached[0] is not model.free:
+        if len(_lattice_lists) >= 4 * KIDNAP_PHASES:
+            _lattice_lists.clear()
+        rows, cols = (KIDNAP_STEP * index for index in np.nonzero(lattice_cells(model, phase)))
+        rows.flags.writeable = cols.flags.writeable = False     # shared by the updates
+        cached = _lattice_lists[key] = (model.free, rows, cols)
+    return cached[1], cached[2]
+
+
 def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase: int,
                      weight: float, share: float, floor: float, peak: float,
                      total: float, compiled: bool = True) -> LatticeWeights | None:
@@ -362,7 +380,7 @@ def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase
     likelihood and their weights' sum relative to it, which bound the posterior of a
     lattice state from above: the lattice only adds to the sum."""
     step = KIDNAP_STEP
-    rows, cols = (step * index for index in np.nonzero(lattice_cells(model, phase)))
+    rows, cols = _lattice_list(model, phase)
     per_state = share / (rows.size * -(-model.heading_bins // step)) if rows.size else 0.0
     if not (share > 0.0 and rows.size > 0):
         return None
