@@ -4,10 +4,11 @@ peer's parameter file unchanged under ``use_sim_time``, the IMU's mount (test1) 
 ``/tf_static``; the last ``odometry/filtered`` position within the peer's tolerance of its
 result, and the estimate on ``/tf`` as ``odom -> base_link``.
 
-test1.bag spans 395 s and test2.bag 61 s: they are played at 4 and 2 times their rates (the
-peer plays them at 1), which keeps the suite short and leaves the filter the same inputs on
-the bag's clock. Faster is not safe: the peer's files subscribe best effort with queues of
-10, and a node that lags under load loses readings (test1 at 8x was once 3.5 m off).
+test1.bag spans 395 s and test2.bag 61 s: test1 is played at 4 times its rate (the peer
+plays both at 1), which keeps the suite short and leaves the filter the same inputs on the
+bag's clock. Faster is not safe: the peer's files subscribe best effort with queues of 10,
+and a node that lags under load loses readings (test1 at 8x was once 3.5 m off; test2 at 2x,
+with both cores busy and more beside them, 1.4 m).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ from tests.unit.test_fusion_bags import FILES, PEER_TESTS, SHARED
 
 #: The Husky's IMU mount in test1 (tests/unit/test_fusion_bags.py says how it was read).
 HUSKY_IMU = Transform((0.0, -0.3, 0.52), quaternion_from_rpy(math.pi / 2, 0.0, -math.pi / 2))
-RATES = {"test1.bag": 4.0, "test2.bag": 2.0}
+RATES = {"test1.bag": 4.0, "test2.bag": 1.0}
 
 
 @pytest.mark.skipif(not SHARED.is_dir(), reason="../shared/data/robot_localization is absent")

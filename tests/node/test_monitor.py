@@ -142,3 +142,31 @@ def test_a_monitor_that_matched_late_records_what_it_missed(context, executor, m
         executor.remove_node(monitor)
         source.destroy_node()
         monitor.destroy_node()
+
+
+def test_the_demos_monitor_leaves_out_a_sample_published_before_its_run_began(context,
+                                                                              executor):
+    """A graph still running in the domain keeps its latest belief for late subscribers:
+    the demo's monitor, made before any node of its run, takes none of it for the run's."""
+    import time
+
+    from rclpy.node import Node
+
+    stale = Node("graph_of_another_run", context=context)
+    old = stale.create_publisher(Float64MultiArray, topics.BELIEF, latched_qos(1))
+    old.publish(belief_at(1, size=5))
+    monitor = RunMonitor(quiet=True, context=context, run_started_ns=time.time_ns())
+    source = Node("simulated_graph", context=context)
+    for node in (stale, monitor, source):
+        executor.add_node(node)
+    try:
+        assert spin_until(executor, lambda: monitor.foreign["/" + topics.BELIEF] == 1, 10.0)
+        belief = source.create_publisher(Float64MultiArray, topics.BELIEF, latched_qos(1))
+        assert spin_until(executor, lambda: belief.get_subscription_count() > 0, 10.0)
+        belief.publish(belief_at(2, size=20))
+        assert spin_until(executor, lambda: len(monitor.record.corrected) == 1, 10.0)
+        assert monitor.record.corrected[0].size == 20
+    finally:
+        for node in (stale, source, monitor):
+            executor.remove_node(node)
+            node.destroy_node()

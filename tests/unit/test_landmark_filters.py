@@ -255,6 +255,7 @@ def test_the_filters_with_the_scale_state_equal_filterpy_on_a_simulated_run(kind
                                                 (Ranging("depth", 1.035), 0.015)],
                          ids=["distance", "depth", "depth, scale estimated"])
 @pytest.mark.parametrize("kind", ["ekf", "ukf"])
+@pytest.mark.timeout(360)     # 50 s alone; several times that with both cores busy
 def test_both_filters_equal_filterpy_over_a_whole_real_run(kind, ranging, scale_std):
     events, landmarks, x0 = dataset_events(1, seconds=1e9)
     x, P = ours(kind, events, landmarks, x0, ranging, scale_std)

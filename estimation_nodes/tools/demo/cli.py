@@ -14,6 +14,7 @@ import os
 import re
 import signal
 import sys
+import time
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -328,7 +329,9 @@ def make_monitor(args: argparse.Namespace, sinks: list):
     # /diagnostics only when a live view shows it: the monitor has no other use for it.
     extra = {topics.DIAGNOSTICS: topics.LIVE_TOPIC_TYPES[topics.DIAGNOSTICS]} \
         if args.foxglove else {}
-    return RunMonitor(quiet=args.quiet, sinks=sinks, sink_only_topics=extra)
+    # Every node of the run is started after this: what was published before is not its.
+    return RunMonitor(quiet=args.quiet, sinks=sinks, sink_only_topics=extra,
+                      run_started_ns=time.time_ns())
 
 
 # --- running the graph -----------------------------------------------------------------------

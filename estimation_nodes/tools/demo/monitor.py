@@ -8,7 +8,9 @@ RunRecord and the display.
 from __future__ import annotations
 
 import importlib
+import os
 import time
+from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from typing import Protocol
 
@@ -84,9 +86,16 @@ class RunMonitor(Node):
     """
 
     def __init__(self, quiet: bool = False, sinks: Sequence[RawSink] = (),
-                 sink_only_topics: Mapping[str, str] | None = None, **kwargs) -> None:
+                 sink_only_topics: Mapping[str, str] | None = None,
+                 run_started_ns: int | None = None, **kwargs) -> None:
         super().__init__(MONITOR, **kwargs)
         self.record = RunRecord()
+        # With ``run_started_ns`` (the demo's: every node of its run starts after it), a
+        # sample published before it (a latched one of a graph still running in the
+        # domain) is not of this run; without, every sample is (a monitor that joins late).
+        self._started_ns = run_started_ns if run_started_ns is not None else 0
+        #: Topic -> samples left out as published before the run began.
+        self.foreign: Counter[str] = Counter()
         self._quiet = quiet
         self._sinks = tuple(sinks)
         observed = {**topics.TOPIC_TYPES, **(sink_only_topics or {})}
@@ -129,6 +138,9 @@ class RunMonitor(Node):
         def on_raw(data: bytes, info: dict) -> None:
             received = time.time_ns()
             published = info.get("source_timestamp") or received
+            if published < self._started_ns:
+                self._leave_out_foreign(resolved)
+                return
             sequence = info.get("publication_sequence_number")
             for sink in self._sinks:
                 sink.write(resolved, data, received, published, sequence)
@@ -137,6 +149,13 @@ class RunMonitor(Node):
                 self.record.stamp(topic, published)
 
         return on_raw
+
+    def _leave_out_foreign(self, topic: str) -> None:
+        if not self.foreign[topic]:
+            self.get_logger().warning(
+                f"{topic}: a sample published before this run began left out (another "
+                f"graph in ROS domain {os.environ.get('ROS_DOMAIN_ID', '0')}?)")
+        self.foreign[topic] += 1
 
     def _say(self, text: str) -> None:
         if not self._quiet:
