@@ -280,6 +280,20 @@ def test_gaussian_prior_is_the_gaussian_over_the_free_states():
     np.testing.assert_allclose(prior, expected / expected.sum(), rtol=1e-9, atol=1e-15)
 
 
+def test_a_prior_written_over_a_belief_is_the_same_and_a_refused_one_writes_nothing():
+    model = small_model(rows=9, cols=11, bins=8, obstacles=0.3)
+    covariance = np.diag([0.04, 0.09, 0.3])
+    held = random_belief(model)
+    prior = gaussian_prior(model, 0.1, 1.6, 3.0, covariance, out=held)
+    assert prior is held
+    np.testing.assert_array_equal(prior, gaussian_prior(model, 0.1, 1.6, 3.0, covariance))
+    before = held.copy()
+    with pytest.raises(errors.NonFiniteResultError):
+        gaussian_prior(model, 1e300, 1e300, 0.0, covariance, out=held)
+    np.testing.assert_array_equal(held, before)
+    np.testing.assert_array_equal(uniform_over_free(model, out=held), uniform_over_free(model))
+
+
 def test_a_prior_that_covers_no_free_cell_goes_to_the_nearest_free_states():
     model = small_model(rows=9, cols=11, bins=8, obstacles=0.0)
     free = model.free.copy()
@@ -335,6 +349,20 @@ def test_the_compiled_prediction_equals_numpys(delta):
     slow = correct_scan(belief, model, ranges, angles, compiled=False)
     np.testing.assert_allclose(fast[0], slow[0], rtol=1e-12, atol=1e-300)
     assert fast[1] == pytest.approx(slow[1], rel=1e-12)
+
+
+@pytest.mark.parametrize("delta", [(0.3, 0.17, -0.1), (0.0, 0.0, 0.0)])
+def test_the_compiled_prediction_of_a_few_heading_layers_equals_numpys(delta):
+    """The compiled passes skip the layers without probability: the same prediction."""
+    pytest.importorskip("numba")
+    model = compiled_sized_model()
+    noise = OdometryNoise(alpha1=0.1, alpha2=0.3, alpha3=0.15, alpha4=0.05)
+    belief = random_belief(model)
+    belief[[k for k in range(model.heading_bins) if k not in (0, 3, 4)]] = 0.0
+    belief /= belief.sum()
+    np.testing.assert_allclose(predict(belief, model, delta, noise),
+                               predict(belief, model, delta, noise, compiled=False),
+                               rtol=0, atol=1e-15)
 
 
 def test_a_scan_of_more_beams_than_independent_ones_is_a_tempered_likelihood():

@@ -162,23 +162,22 @@ def test_the_odometry_failing_is_a_mixture_component_scored_on_the_lattice_aroun
     of the mixture's evidence, its states where the scan fits."""
     model = corridor_settings().model
     step = 2
-    cells = model.free[::step, ::step]
+    rows, cols = (step * index for index in np.nonzero(model.free[::step, ::step]))
     headings = model.headings()[::step]
     rng = np.random.default_rng(5)
-    weights = rng.random((headings.size, *cells.shape)) * cells
+    weights = rng.random((headings.size, rows.size))
     centre, tracked = (3.0, 1.6, 0.5), 0.7
-    found = failure.astray_in(model, weights, step, cells, tracked, centre)
+    found = failure.astray_in(model, weights, rows, cols, tracked, centre)
     xs, ys = model.cell_centres()
-    x, y = np.meshgrid(xs[::step], ys[::step])
+    x, y = xs[cols], ys[rows]
     distance = np.hypot(x - centre[0], y - centre[1])
-    disc = (distance <= failure.ASTRAY_RADIUS_M) & cells
-    places = np.where(disc, np.maximum(distance, failure.ASTRAY_NEAR_M)
-                      ** -failure.ASTRAY_FALL, 0)
+    places = np.where(distance <= failure.ASTRAY_RADIUS_M,
+                      np.maximum(distance, failure.ASTRAY_NEAR_M) ** -failure.ASTRAY_FALL, 0)
     same = np.array([abs(math.remainder(h - centre[2], 2 * math.pi)) <= failure.ASTRAY_TURN_RAD
                      for h in headings])
     bearings = np.where(same, failure.ASTRAY_SAME_HEADING / same.sum(),
                         (1 - failure.ASTRAY_SAME_HEADING) / (~same).sum())
-    prior = bearings[:, None, None] * (places / places.sum())[None]
+    prior = bearings[:, None] * (places / places.sum())[None]
     assert prior.sum() == pytest.approx(1.0)
     share = failure.ASTRAY_PROBABILITY * float((weights * prior).sum())
     expected = share / (share + (1 - failure.ASTRAY_PROBABILITY) * tracked)

@@ -10,7 +10,8 @@ from estimation_nodes.core.grid import window
 from estimation_nodes.core.grid.correction import correct
 from estimation_nodes.core.grid.laser import (
     _scan_log_likelihood,
-    _scan_log_likelihood_strided,
+    _scan_log_likelihood_cells,
+    _scan_reads,
     scan_log_likelihood,
 )
 from estimation_nodes.core.grid.localization import GridLocalization
@@ -34,9 +35,9 @@ def room(rows, cols, bins=16, resolution=0.1):
                      resolution=resolution, origin=(-1.0, 2.0), heading_bins=bins)
 
 
-def scan(count=12):
+def scan(count=12, rng=RNG):
     angles = np.linspace(-math.pi, math.pi, count, endpoint=False)
-    return 0.2 + RNG.random(count), angles
+    return 0.2 + rng.random(count), angles
 
 
 def tracked_pair(model, floor, kidnap=0.0, compiled=True):
@@ -183,13 +184,50 @@ def test_a_kidnapped_robot_is_found_on_the_lattice():
 def test_the_compiled_lattice_scan_equals_numpys_and_the_dense_scan_on_the_lattice():
     model = room(260, 250)     # a lattice of 8 x 130 x 125 states: the compiled path
     assert compiled_kernels(8 * 130 * 125) is not None
-    ranges, angles = scan(20)
-    compiled = _scan_log_likelihood_strided(model, ranges, angles, 2, compiled=True)
-    numpy_s = _scan_log_likelihood_strided(model, ranges, angles, 2, compiled=False)
+    ranges, angles = scan(20, np.random.default_rng(11))
+    reads = _scan_reads(model, ranges, angles)
+    rows, cols = (2 * index for index in np.nonzero(window.lattice_cells(model, 1)))
+    compiled, scored = _scan_log_likelihood_cells(model, reads, 2, rows, cols, compiled=True)
+    numpy_s, _ = _scan_log_likelihood_cells(model, reads, 2, rows, cols, compiled=False)
     dense = _scan_log_likelihood(model, ranges, angles)
-    np.testing.assert_allclose(compiled, numpy_s, rtol=0, atol=1e-12)
-    np.testing.assert_allclose(compiled, dense[::2, ::2, ::2] * model.free[::2, ::2],
-                               rtol=0, atol=1e-12)
+    # The same sums in the same order: the same bits.
+    assert scored.all()
+    np.testing.assert_array_equal(compiled, numpy_s)
+    np.testing.assert_array_equal(compiled, dense[::2][:, rows, cols])
+
+
+def test_a_lattice_state_stops_being_scored_only_below_its_bound():
+    """Stopped sums are upper bounds below the threshold; the others are exact, on both
+    paths alike."""
+    model = room(260, 250)
+    ranges, angles = scan(20, np.random.default_rng(11))
+    reads = _scan_reads(model, ranges, angles)
+    rows, cols = (2 * index for index in np.nonzero(window.lattice_cells(model, 0)))
+    dense = _scan_log_likelihood(model, ranges, angles)[::2][:, rows, cols]
+    below = np.full(rows.size, float(np.median(dense)))
+    below[::3] = -math.inf        # never stopped
+    compiled, scored = _scan_log_likelihood_cells(model, reads, 2, rows, cols, below)
+    numpy_s, numpy_scored = _scan_log_likelihood_cells(model, reads, 2, rows, cols, below,
+                                                       compiled=False)
+    np.testing.assert_array_equal(scored, numpy_scored)
+    np.testing.assert_array_equal(compiled, numpy_s)
+    assert 0 < scored.sum() < scored.size
+    assert scored[:, ::3].all()
+    np.testing.assert_array_equal(compiled[scored], dense[scored])
+    # Upper bounds (to the rounding of a sum in another order).
+    assert (compiled[~scored] >= dense[~scored] - 1e-9).all()
+    assert (compiled[~scored] < below[None].repeat(scored.shape[0], 0)[~scored]).all()
+
+
+def test_a_window_scores_only_its_heading_layers_with_probability():
+    model = room(40, 44)
+    ranges, angles = scan(20, np.random.default_rng(11))
+    headings = np.array([3, 4, 5, 15])
+    box = (5, 30, 7, 40)
+    dense = _scan_log_likelihood(model, ranges, angles, box=box)
+    np.testing.assert_array_equal(
+        _scan_log_likelihood(model, ranges, angles, box=box, headings=headings),
+        dense[headings])
 
 
 def test_the_windowed_steps_need_no_kernel_beyond_those_compiled_at_load():
@@ -203,7 +241,7 @@ def test_the_windowed_steps_need_no_kernel_beyond_those_compiled_at_load():
     loc.set_prior((12.0, 16.0, 0.3), np.diag([0.6, 0.6, 0.05]))
     compiled = {name: len(getattr(kernels, name).signatures) for name in
                 ("shift_motion", "blur_headings", "blur_rows", "blur_cols_masked",
-                 "scan_log_likelihood", "scan_log_likelihood_strided")}
+                 "scan_log_likelihood", "scan_log_likelihood_cells")}
     ranges, angles = scan(30)
     for step in range(4):
         loc.on_odometry((0.1 * step, 0.0, 0.05 * step), (step + 1) * SECOND)
@@ -254,3 +292,21 @@ def test_support_boxes_group_near_cells_and_never_overlap():
     # Boxes that overlap are joined, repeatedly: a chain of three becomes one.
     assert window.disjoint([(0, 5, 0, 5), (4, 9, 8, 12), (8, 12, 0, 9)]) == [(0, 12, 0, 12)]
     assert window.disjoint([(0, 5, 0, 5), (5, 9, 5, 9)]) == [(0, 5, 0, 5), (5, 9, 5, 9)]
+
+
+def test_more_groups_than_max_windows_are_joined_with_their_nearest_not_into_one_box():
+    footprint = np.zeros((200, 220), dtype=bool)
+    count = window.MAX_WINDOWS + 3
+    footprint[10, 10:10 + 10 * count:10] = True       # a row of groups 10 cells apart
+    footprint[180, 60:60 + 10 * count:10] = True      # another, far from the first
+    boxes = window.support_boxes(footprint)
+    assert len(boxes) == 2
+    covered = np.zeros_like(footprint)
+    for r0, r1, c0, c1 in boxes:
+        covered[r0:r1, c0:c1] = True
+    assert covered[footprint].all()
+    assert covered.sum() < 0.01 * footprint.size
+    # Few enough groups keep a window each.
+    few = np.zeros_like(footprint)
+    few[10, 10:10 + 10 * window.MAX_WINDOWS:10] = True
+    assert len(window.support_boxes(few)) == window.MAX_WINDOWS

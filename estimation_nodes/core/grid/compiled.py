@@ -32,16 +32,20 @@ _jit = njit(nogil=True, cache=True)
 
 @_jit
 def shift_motion(belief: FloatArray, shift_rows: FloatArray, shift_cols: FloatArray,
-                 turn: float, out: FloatArray) -> None:
+                 turn: float, held: np.ndarray, out: FloatArray, made: np.ndarray) -> None:
     """out = belief moved: layer k by (shift_rows[k], shift_cols[k]) cells (bilinear),
     every heading by ``turn`` bins (linear, cyclic); mass leaving the grid is lost.
     ``shift_rows`` and ``shift_cols`` have one value per heading, each within the grid's
-    size plus one; |turn| is at most the number of headings."""
+    size plus one; |turn| is at most the number of headings. Only the layers ``held``
+    (the others are zero) are moved; ``made`` is set where out's may not be zero."""
     bins, rows, cols = belief.shape
     out[:] = 0.0
+    made[:] = False
     turn_base = int(np.floor(turn))
     turn_frac = turn - turn_base
     for k in range(bins):
+        if not held[k]:
+            continue
         k0 = (k + turn_base) % bins
         k1 = (k0 + 1) % bins
         base_r = int(np.floor(shift_rows[k]))
@@ -64,6 +68,9 @@ def shift_motion(belief: FloatArray, shift_rows: FloatArray, shift_cols: FloatAr
                 w0 = w * (1.0 - turn_frac)
                 w1 = w * turn_frac
                 width = j_hi - j_lo
+                made[k0] = True
+                if w1 != 0.0:
+                    made[k1] = True
                 for i in range(i_lo, i_hi):
                     src = belief[k, i, j_lo:j_hi]
                     dst0 = out[k0, i + rs, j_lo + cs:j_hi + cs]
@@ -76,27 +83,37 @@ def shift_motion(belief: FloatArray, shift_rows: FloatArray, shift_cols: FloatAr
 
 
 @_jit
-def blur_headings(source: FloatArray, taps: FloatArray, out: FloatArray) -> None:
-    """out[k] = sum_t taps[t] * source[(k + t - half) % K] (cyclic)."""
+def blur_headings(source: FloatArray, taps: FloatArray, held: np.ndarray, out: FloatArray,
+                  made: np.ndarray) -> None:
+    """out[k] = sum_t taps[t] * source[(k + t - half) % K] (cyclic), over the source layers
+    ``held`` (the others are zero); ``made`` is set where out's may not be zero."""
     bins = source.shape[0]
     half = taps.size // 2
     out[:] = 0.0
+    made[:] = False
     for k in range(bins):
         target = out[k].ravel()
         for t in range(taps.size):
-            layer = source[(k + t - half) % bins].ravel()
+            index = (k + t - half) % bins
+            if not held[index]:
+                continue
+            made[k] = True
+            layer = source[index].ravel()
             weight = taps[t]
             for n in range(target.size):
                 target[n] += weight * layer[n]
 
 
 @_jit
-def blur_rows(source: FloatArray, taps: FloatArray, out: FloatArray) -> None:
-    """out[k, i] = sum_t taps[t] * source[k, i + t - half] (rows, along y; zero outside)."""
+def blur_rows(source: FloatArray, taps: FloatArray, held: np.ndarray, out: FloatArray) -> None:
+    """out[k, i] = sum_t taps[t] * source[k, i + t - half] (rows, along y; zero outside),
+    over the layers ``held`` (the others are zero)."""
     bins, rows, cols = source.shape
     half = taps.size // 2
     out[:] = 0.0
     for k in range(bins):
+        if not held[k]:
+            continue
         for i in range(rows):
             target = out[k, i]
             for t in range(taps.size):
@@ -110,16 +127,20 @@ def blur_rows(source: FloatArray, taps: FloatArray, out: FloatArray) -> None:
 
 @_jit
 def blur_cols_masked(source: FloatArray, taps: FloatArray, free: np.ndarray,
-                     out: FloatArray) -> float:
-    """out[k, i, j] = free[i, j] * sum_t taps[t] * source[k, i, j + t - half] (along x);
-    returns the total, for the normalization. Each row is copied into a zero-padded
-    buffer, so the taps run over plain slices without bounds checks."""
+                     held: np.ndarray, out: FloatArray) -> float:
+    """out[k, i, j] = free[i, j] * sum_t taps[t] * source[k, i, j + t - half] (along x),
+    over the layers ``held`` (the others are zero); returns the total, for the
+    normalization. Each row is copied into a zero-padded buffer, so the taps run over
+    plain slices without bounds checks."""
     bins, rows, cols = source.shape
     half = taps.size // 2
     buffer = np.zeros(cols + 2 * half)
     mask = free.astype(np.float64)
     total = 0.0
     for k in range(bins):
+        if not held[k]:
+            out[k] = 0.0
+            continue
         for i in range(rows):
             buffer[half:half + cols] = source[k, i]
             target = out[k, i]
@@ -157,38 +178,60 @@ def scan_log_likelihood(padded: FloatArray, pad_rows: int, pad_cols: int, offset
                     target[j] += segment[j]
 
 
+#: How many beams a lattice state's sum takes between two looks at its bound.
+CHECK_EVERY = 2
+
+
 @_jit
-def scan_log_likelihood_strided(padded: FloatArray, pad_rows: int, pad_cols: int,
-                                offsets: np.ndarray, step: int, row_starts: np.ndarray,
-                                columns: np.ndarray, out: FloatArray) -> None:
-    """out[k, i, j] = sum_b padded[pad_rows + step i + dr[k, b], pad_cols + step j + dc[k, b]]
-    for the columns j of row i listed in columns[row_starts[i]:row_starts[i + 1]] (the
-    free ones), 0 elsewhere: ``scan_log_likelihood`` at every ``step``-th row and column
-    (the offsets given are those of the headings wanted). Unchecked, as that one."""
-    bins, beams = offsets.shape[0], offsets.shape[1]
-    rows = out.shape[1]
-    out[:] = 0.0
+def scan_log_likelihood_cells(field: FloatArray, starts: np.ndarray, offsets: np.ndarray,
+                              below: FloatArray, most: float, order: np.ndarray,
+                              out: FloatArray, scored: np.ndarray) -> None:
+    """out[k, n] = sum_b field[starts[n] + offsets[k, b]]: the log field flattened, a
+    state cell's position in it and each heading's beam end points as offsets from it;
+    the sums in the order of ``scan_log_likelihood``'s (the same bits).
+
+    Where below[n] > -inf the beams are first summed in ``order`` (spread over the scan:
+    the first few already tell most states apart), and the sum stops once it is less
+    than below[n] even with every beam left scoring ``most`` (the field's largest
+    value): out[k, n] is then that bound and scored[k, n] False. A state that never
+    stops is summed again in the beams' order. Unchecked, as ``scan_log_likelihood``."""
+    bins, beams = offsets.shape
+    count = starts.size
     for k in range(bins):
-        for i in range(rows):
-            target = out[k, i]
-            listed = columns[row_starts[i]:row_starts[i + 1]]
+        offset = offsets[k]
+        for n in range(count):
+            start = starts[n]
+            floor = below[n]
+            scored[k, n] = True
+            if floor > -np.inf:
+                total = 0.0
+                for m in range(beams):
+                    total += field[start + offset[order[m]]]
+                    left = beams - 1 - m
+                    if m % CHECK_EVERY == CHECK_EVERY - 1 and total + left * most < floor:
+                        out[k, n] = total + left * most
+                        scored[k, n] = False
+                        break
+                if not scored[k, n]:
+                    continue
+            total = 0.0
             for b in range(beams):
-                row = padded[pad_rows + step * i + offsets[k, b, 0]]
-                start = pad_cols + offsets[k, b, 1]
-                for j in listed:
-                    target[j] += row[start + step * j]
+                total += field[start + offset[b]]
+            out[k, n] = total
 
 
 def warm_up() -> None:
     """Compile (or load from numba's cache) every kernel on a tiny input."""
     belief = np.full((2, 3, 3), 1.0 / 18)
     out = np.empty_like(belief)
-    shift_motion(belief, np.zeros(2), np.zeros(2), 0.0, out)
+    held, made = np.ones(2, dtype=np.bool_), np.empty(2, dtype=np.bool_)
+    shift_motion(belief, np.zeros(2), np.zeros(2), 0.0, held, out, made)
     taps = np.array([0.25, 0.5, 0.25])
-    blur_headings(belief, taps, out)
-    blur_rows(belief, taps, out)
-    blur_cols_masked(belief, taps, np.ones((3, 3), dtype=np.bool_), out)
+    blur_headings(belief, taps, held, out, made)
+    blur_rows(belief, taps, held, out)
+    blur_cols_masked(belief, taps, np.ones((3, 3), dtype=np.bool_), held, out)
     offsets = np.zeros((2, 1, 2), dtype=np.int64)
     scan_log_likelihood(np.zeros((5, 5)), 1, 1, offsets, 2, 3, 3, out)
-    scan_log_likelihood_strided(np.zeros((5, 5)), 1, 1, offsets, 2, np.array([0, 1, 2]),
-                                np.array([0, 1]), out[:, :2, :2].copy())
+    scan_log_likelihood_cells(np.zeros(25), np.array([6, 8]), np.zeros((2, 1), dtype=np.int64),
+                              np.zeros(2), 0.0, np.zeros(1, dtype=np.int64), np.empty((2, 2)),
+                              np.empty((2, 2), dtype=np.bool_))

@@ -230,11 +230,18 @@ class Astray:
         return float(self.p[(np.hypot(dx, dy) <= radius) & (np.abs(turn) <= angle)].sum())
 
 
-def astray_in(model: GridModel, weights: FloatArray, step: int, cells: np.ndarray,
+def within_reach(model: GridModel, rows: np.ndarray, cols: np.ndarray,
+                 centre: Pose) -> np.ndarray:
+    """Which of the cells (rows[n], cols[n]) are within ASTRAY_RADIUS_M of ``centre``."""
+    xs, ys = model.cell_centres()
+    return np.hypot(xs[cols] - centre[0], ys[rows] - centre[1]) <= ASTRAY_RADIUS_M
+
+
+def astray_in(model: GridModel, weights: FloatArray, rows: np.ndarray, cols: np.ndarray,
               tracked: float, centre: Pose) -> Astray:
     """The odometry-failure component after a correction: ``weights``, the scan's
-    likelihood (relative to a peak) at the lattice's states (every ``step``-th heading,
-    row and column, of the lattice cells ``cells``: 0 elsewhere), ``tracked`` the rest
+    likelihood (relative to a peak) at the kidnap lattice's states (k, n): heading bin
+    KIDNAP_STEP k (every other one) at the cell (rows[n], cols[n]); ``tracked`` the rest
     of the mixture's evidence on the same scale, and ``centre`` the predicted pose.
 
     The component's prior over the lattice states within ASTRAY_RADIUS_M (``_astray_prior``):
@@ -245,23 +252,15 @@ def astray_in(model: GridModel, weights: FloatArray, step: int, cells: np.ndarra
     ASTRAY_SAME_HEADING of the probability (wheels that slip or run backwards keep the
     heading; a robot carried off does not)."""
     xs, ys = model.cell_centres()
-    xs, ys = xs[::step], ys[::step]
-    rows = np.flatnonzero(np.abs(ys - centre[1]) <= ASTRAY_RADIUS_M)
-    cols = np.flatnonzero(np.abs(xs - centre[0]) <= ASTRAY_RADIUS_M)
-    if rows.size == 0 or cols.size == 0:
+    inside = np.flatnonzero(within_reach(model, rows, cols, centre))
+    if inside.size == 0:
         return Astray.none()
-    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    step = -(-model.heading_bins // weights.shape[0])
     headings = model.headings()[::step]
-    prior = _astray_prior(xs[c0:c1] - centre[0], ys[r0:r1] - centre[1],
-                          cells[r0:r1, c0:c1], headings - centre[2])
-    if prior is None:
-        return Astray.none()
-    bearings, places = prior
-    # The disc's scored lattice cells only (a gather of half the window's cells, not a
-    # copy of the window); the evidence as a product with the prior's two factors.
-    rows_in, cols_in = np.nonzero(places)
-    scores = weights[:, r0 + rows_in, c0 + cols_in]
-    near = places[rows_in, cols_in]
+    x, y = xs[cols[inside]], ys[rows[inside]]
+    bearings, near = _astray_prior(np.hypot(x - centre[0], y - centre[1]),
+                                   headings - centre[2])
+    scores = weights[:, inside]
     total = float(bearings @ (scores @ near))
     if not total > 0.0:
         return Astray.none()
@@ -269,24 +268,19 @@ def astray_in(model: GridModel, weights: FloatArray, step: int, cells: np.ndarra
     mass = share / (share + (1.0 - ASTRAY_PROBABILITY) * tracked)
     if mass < ASTRAY_NEGLIGIBLE:
         return Astray.none()
-    inside = scores * bearings[:, None] * near[None, :]
-    k, n = np.nonzero(inside >= ASTRAY_KEPT * float(inside.max()))
-    p = inside[k, n]
-    return Astray(xs[c0 + cols_in[n]], ys[r0 + rows_in[n]], headings[k], p * (mass / p.sum()))
+    posterior = scores * bearings[:, None] * near[None, :]
+    k, n = np.nonzero(posterior >= ASTRAY_KEPT * float(posterior.max()))
+    p = posterior[k, n]
+    return Astray(x[n], y[n], headings[k], p * (mass / p.sum()))
 
 
-def _astray_prior(dx: FloatArray, dy: FloatArray, cells: np.ndarray,
-                  turns: FloatArray) -> tuple[FloatArray, FloatArray] | None:
-    """The odometry-failure component's prior over (heading, row, column) of a lattice
-    window (``dx``, ``dy``: its columns' and rows' offsets from the predicted pose,
-    ``cells`` the lattice cells scored, ``turns`` its headings' offsets), as the product
-    of a distribution over the headings and one over the cells; None when no cell is
-    within reach."""
-    distance = np.hypot(dy[:, None], dx[None, :])
-    disc = (distance <= ASTRAY_RADIUS_M) & cells
-    if not disc.any():
-        return None
-    places = np.where(disc, np.maximum(distance, ASTRAY_NEAR_M) ** -ASTRAY_FALL, 0.0)
+def _astray_prior(distance: FloatArray,
+                  turns: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The odometry-failure component's prior over the lattice states (heading k, cell n)
+    within its reach (``distance``: each cell's from the predicted pose; ``turns``: each
+    heading's offset from the predicted one), as the product of a distribution over the
+    headings and one over the cells."""
+    places = np.maximum(distance, ASTRAY_NEAR_M) ** -ASTRAY_FALL
     places /= places.sum()
     same = np.abs(np.remainder(turns + math.pi, 2 * math.pi) - math.pi) <= ASTRAY_TURN_RAD
     bearings = np.where(same, ASTRAY_SAME_HEADING / max(int(same.sum()), 1),

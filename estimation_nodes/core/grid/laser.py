@@ -10,6 +10,7 @@ is made from the map by likelihood_field.py.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -108,78 +109,158 @@ def scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray
     return _scan_log_likelihood(model, *check_scan(ranges, angles), compiled)
 
 
-def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
-                         compiled: bool = True,
-                         box: tuple[int, int, int, int] | None = None) -> FloatArray:
-    """The scan's log likelihood over every state, or over the states of the window
-    ``box`` (first row, row past the last, first column, column past the last; see
-    grid/window.py): (K, rows, columns) of the box. The compiled kernels or numpy's are
-    chosen by the grid's states, not the box's: numpy's cost a pass per heading and
-    beam, whatever the box's size."""
+@dataclass(frozen=True)
+class ScanReads:
+    """Where a scan's beams read the log field: each heading's end point offsets (K,
+    beams, 2) from the state cell, and the field padded by ``log_outside`` for them
+    (``_padded_field``). Made once per scan, read by the windows' and the lattice's
+    scores alike."""
+
+    offsets: np.ndarray
+    padded: FloatArray
+    pad_rows: int
+    pad_cols: int
+
+
+def _scan_reads(model: GridModel, ranges: FloatArray, angles: FloatArray) -> ScanReads:
     if ranges.size * model.log_bound > LOG_SUM_LIMIT:
         raise InvalidInputError(f"ranges: {ranges.size} beams over log likelihoods as large "
                                 f"as {model.log_bound:g} would overflow their sum")
     offsets = _beam_endpoints(model, ranges, angles)
-    padded, pad_rows, pad_cols = _padded_field(model, offsets)
+    return ScanReads(offsets, *_padded_field(model, offsets))
+
+
+def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArray,
+                         compiled: bool = True,
+                         box: tuple[int, int, int, int] | None = None,
+                         headings: np.ndarray | None = None,
+                         reads: ScanReads | None = None) -> FloatArray:
+    """The scan's log likelihood over every state, or over the states of the window
+    ``box`` (first row, row past the last, first column, column past the last; see
+    grid/window.py): (K, rows, columns) of the box; with ``headings`` (bin indices) at
+    those heading layers only, in that order. The compiled kernels or numpy's are
+    chosen by the grid's states, not the box's: numpy's cost a pass per heading and
+    beam, whatever the box's size. ``reads``: the scan's, when already made."""
+    reads = reads if reads is not None else _scan_reads(model, ranges, angles)
+    offsets = reads.offsets if headings is None else \
+        np.ascontiguousarray(reads.offsets[headings])
     r0, r1, c0, c1 = box if box is not None else (0, model.free.shape[0], 0,
                                                   model.free.shape[1])
     # The window's cell (i, j) is the map's (r0 + i, c0 + j): the same field, read
     # from further in.
-    pad_rows, pad_cols = pad_rows + r0, pad_cols + c0
+    padded, pad_rows, pad_cols = reads.padded, reads.pad_rows + r0, reads.pad_cols + c0
     rows, cols = r1 - r0, c1 - c0
-    shape = (model.heading_bins, rows, cols)
+    shape = (offsets.shape[0], rows, cols)
     kernels = compiled_kernels(_states(model), compiled)
     if kernels is not None:
         out = np.empty(shape)      # the kernel writes every element
-        kernels.scan_log_likelihood(padded, pad_rows, pad_cols, offsets, model.heading_bins,
+        kernels.scan_log_likelihood(padded, pad_rows, pad_cols, offsets, shape[0],
                                     rows, cols, out)
         return out
     total = np.zeros(shape)
-    for k in range(model.heading_bins):
+    for k in range(shape[0]):
         layer = total[k]
         for dr, dc in offsets[k]:
             layer += padded[pad_rows + dr:pad_rows + dr + rows, pad_cols + dc:pad_cols + dc + cols]
     return total
 
 
-def _scan_log_likelihood_strided(model: GridModel, ranges: FloatArray, angles: FloatArray,
-                                 step: int, compiled: bool = True,
-                                 cells: np.ndarray | None = None) -> FloatArray:
-    """The scan's log likelihood at every ``step``-th heading, row and column: the
-    states (step k, step i, step j) of ``_scan_log_likelihood``, in its order of sums;
-    0 at the lattice's cells that are not free, or not in ``cells`` (a mask over the
-    lattice's cells, at most its free ones) where given: only those are scored."""
-    offsets = np.ascontiguousarray(_beam_endpoints(model, ranges, angles)[::step])
-    padded, pad_rows, pad_cols = _padded_field(model, offsets)
-    lattice_free = model.free[::step, ::step] if cells is None else cells
-    shape = (offsets.shape[0], *lattice_free.shape)
+#: How many beams a listed state's sum takes between two looks at its bound (compiled.py's
+#: CHECK_EVERY: both paths stop the same sums).
+CHECK_EVERY = 2
+
+
+def _scan_log_likelihood_cells(model: GridModel, reads: ScanReads, step: int,
+                               rows: np.ndarray, cols: np.ndarray,
+                               below: FloatArray | None = None,
+                               compiled: bool = True) -> tuple[FloatArray, np.ndarray]:
+    """The scan's log likelihood at every ``step``-th heading and at the cells (rows[n],
+    cols[n]) only: (ceil(K / step), n), element [k, n] the state (step k, rows[n],
+    cols[n]) of ``_scan_log_likelihood``, in its order of sums (the same bits). The
+    kidnap lattice's states, listed: no pass over the cells it leaves out.
+
+    With ``below`` (one log likelihood per cell), a state whose first beams already make
+    its sum less than below[n] with every beam left scoring the field's largest value is
+    not scored further: its element is that upper bound instead, and False in the second
+    array returned (True where the sum is the state's log likelihood)."""
+    padded = reads.padded
+    width = padded.shape[1]
+    offsets = reads.offsets[::step]
+    # Offsets and cells as positions in the flattened padded field.
+    flat_offsets = np.ascontiguousarray(offsets[..., 0] * width + offsets[..., 1])
+    starts = np.ascontiguousarray((reads.pad_rows + rows) * width + reads.pad_cols + cols,
+                                  dtype=np.int64)
+    below = np.full(starts.size, -math.inf) if below is None else \
+        np.ascontiguousarray(below, dtype=np.float64)
+    most = max(float(model.log_field.max()), model.log_outside)
+    beams = flat_offsets.shape[1]
+    order = _spread_order(beams)
+    field = padded.ravel()
+    out = np.empty((offsets.shape[0], starts.size))
+    scored = np.ones(out.shape, dtype=bool)
     kernels = compiled_kernels(_states(model), compiled)   # as the grid's other steps
     if kernels is not None:
-        out = np.empty(shape)
-        rows, columns = np.nonzero(lattice_free)
-        row_starts = np.searchsorted(rows, np.arange(shape[1] + 1))
-        # nonzero's arrays are strided views: contiguous ones are what warm_up compiled for.
-        kernels.scan_log_likelihood_strided(padded, pad_rows, pad_cols, offsets, step,
-                                            row_starts, np.ascontiguousarray(columns), out)
-        return out
-    total = np.zeros(shape)
-    rows, cols = shape[1:]
-    for k in range(shape[0]):
-        layer = total[k]
-        for dr, dc in offsets[k]:
-            layer += padded[pad_rows + dr:pad_rows + dr + step * rows:step,
-                            pad_cols + dc:pad_cols + dc + step * cols:step]
-    total *= lattice_free
-    return total
+        kernels.scan_log_likelihood_cells(field, starts, flat_offsets, below, most, order,
+                                          out, scored)
+        return out, scored
+    bounded = below > -math.inf
+    for k in range(out.shape[0]):
+        total, going = np.zeros(starts.size), bounded.copy()
+        for m, offset in enumerate(flat_offsets[k][order]):
+            total[going] += field[starts[going] + offset]
+            if m % CHECK_EVERY == CHECK_EVERY - 1:
+                stops = going & (total + (beams - 1 - m) * most < below)
+                total[stops] += (beams - 1 - m) * most
+                going &= ~stops
+                scored[k, stops] = False
+        summed = scored[k]
+        total[summed] = 0.0
+        for offset in flat_offsets[k]:
+            total[summed] += field[starts[summed] + offset]
+        out[k] = total
+    return out, scored
+
+
+#: The beams' order for a bound: every SPREAD-th beam first, then the next of each.
+SPREAD = 6
+
+
+def _spread_order(beams: int) -> np.ndarray:
+    """0, SPREAD, 2 SPREAD, ..., 1, 1 + SPREAD, ...: neighbouring beams say much the same,
+    so the first few of this order tell a wrong state sooner than the first few of the
+    scan."""
+    return np.concatenate([np.arange(first, beams, SPREAD) for first in range(SPREAD)]) \
+        .astype(np.int64)
+
+
+#: The padded field's border grows in steps of this many cells, so that the scans of one
+#: map mostly share one padded field (``_padded_field``'s cache).
+PAD_STEP = 64
+#: Padded fields kept: one per map in use (a process may hold several localizers).
+PADDED_KEPT = 4
+_padded: dict[int, tuple[FloatArray, int, int, FloatArray]] = {}
 
 
 def _padded_field(model: GridModel, offsets: np.ndarray) -> tuple[FloatArray, int, int]:
     """The log field with a border of ``log_outside`` wide enough for every offset: at
-    most (3 H + 2) x (3 W + 2) values, since the offsets are cut to the map's size."""
-    pad_rows = int(np.abs(offsets[..., 0]).max(initial=0)) + 1
-    pad_cols = int(np.abs(offsets[..., 1]).max(initial=0)) + 1
+    most (3 H + 2) x (3 W + 2) values, since the offsets are cut to the map's size. Made
+    once per map and border (the border rounded up to PAD_STEP cells), not per scan: a
+    building's is megabytes."""
+    rows, cols = model.log_field.shape
+    needed_rows = int(np.abs(offsets[..., 0]).max(initial=0)) + 1
+    needed_cols = int(np.abs(offsets[..., 1]).max(initial=0)) + 1
+    key = id(model.log_field)
+    cached = _padded.get(key)
+    if cached is not None and cached[0] is model.log_field and cached[1] >= needed_rows \
+            and cached[2] >= needed_cols:
+        return cached[3], cached[1], cached[2]
+    pad_rows = min(-(-needed_rows // PAD_STEP) * PAD_STEP, rows + 1)
+    pad_cols = min(-(-needed_cols // PAD_STEP) * PAD_STEP, cols + 1)
     padded = np.pad(model.log_field, ((pad_rows, pad_rows), (pad_cols, pad_cols)),
                     constant_values=model.log_outside)
+    if len(_padded) >= PADDED_KEPT and key not in _padded:
+        _padded.pop(next(iter(_padded)))
+    _padded[key] = (model.log_field, pad_rows, pad_cols, padded)
     return padded, pad_rows, pad_cols
 
 

@@ -189,7 +189,7 @@ class GridLocalization:
 
     def global_localization(self) -> None:
         """Not knowing where the robot is: uniform over the free cells."""
-        self._hold(uniform_over_free(self.model))
+        self._hold(uniform_over_free(self.model, out=self.belief))
         self.log_evidence = float("nan")
         self._forget_doubt()
         self._started = UNIFORM
@@ -197,7 +197,9 @@ class GridLocalization:
     def set_prior(self, pose: Pose, covariance: FloatArray) -> None:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
         x, y, yaw = check_pose("pose", pose)
-        prior = gaussian_prior(self.model, x, y, yaw, covariance)
+        # Written over the belief (a building's is hundreds of MB): the prior refused, the
+        # belief is as it was.
+        prior = gaussian_prior(self.model, x, y, yaw, covariance, out=self.belief)
         self._hold(prior)
         self._forget_doubt()
         self._started = "the initial pose"

@@ -220,17 +220,23 @@ def _spread_compiled(kernels: ModuleType, belief: FloatArray, model: GridModel,
     sigma_cells, sigma_bins = _motion_noise(delta, noise, model)
     rows, cols = model.free.shape
     first, second = np.empty_like(belief), np.empty_like(belief)
-    kernels.shift_motion(belief, shift_rows, shift_cols, (rot1 + rot2) / model.bin_width, first)
+    # The heading layers that may hold probability, through each pass: the others are
+    # zero before and after it, and are not passed over (a tracked belief holds a few).
+    held, made = belief.any(axis=(1, 2)), np.empty(model.heading_bins, dtype=bool)
+    kernels.shift_motion(belief, shift_rows, shift_cols, (rot1 + rot2) / model.bin_width,
+                         held, first, made)
+    held, made = made, held
     taps = _heading_taps(sigma_bins, model.heading_bins)
     if not _identity(taps):
-        kernels.blur_headings(first, taps, second)
+        kernels.blur_headings(first, taps, held, second, made)
         first, second = second, first
+        held, made = made, held
     taps = _reaching_taps(sigma_cells, rows)
     if not _identity(taps):
-        kernels.blur_rows(first, taps, second)
+        kernels.blur_rows(first, taps, held, second)
         first, second = second, first
     total = kernels.blur_cols_masked(first, _reaching_taps(sigma_cells, cols), model.free,
-                                     second)
+                                     held, second)
     return second, float(total)
 
 

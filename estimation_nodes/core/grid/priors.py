@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
@@ -20,21 +21,33 @@ def _covariance_3x3(covariance: Any) -> FloatArray:
     return check_covariance("covariance", matrix, 3)
 
 
-def uniform_over_free(model: GridModel) -> FloatArray:
-    """Not knowing where the robot is: equal probability on every free cell and heading."""
+def uniform_over_free(model: GridModel, out: FloatArray | None = None) -> FloatArray:
+    """Not knowing where the robot is: equal probability on every free cell and heading.
+    ``out``: a float array of the model's shape to write it in (a building's belief is
+    hundreds of MB: the localizer's own is reused, not a second one made)."""
     _check_model(model)
     layer = model.free / float(np.count_nonzero(model.free) * model.shape[0])
-    belief = np.empty(model.shape)
+    belief = _belief_array(model, out)
     belief[:] = layer     # one tensor, no temporary of its size
     return belief
 
 
+def _belief_array(model: GridModel, out: FloatArray | None) -> FloatArray:
+    if out is None:
+        return np.empty(model.shape)
+    if out.shape != model.shape or out.dtype != np.float64 or not out.flags.c_contiguous:
+        raise InvalidInputError(f"out: expected a C-contiguous float array of shape "
+                                f"{model.shape}, got {out.dtype} {out.shape}")
+    return out
+
+
 def gaussian_prior(model: GridModel, x: float, y: float, yaw: float,
-                   covariance: FloatArray) -> FloatArray:
+                   covariance: FloatArray, out: FloatArray | None = None) -> FloatArray:
     """A prior from a pose and its 3 x 3 covariance over (x, y, yaw), as RViz's "2D Pose
     Estimate" sends one, restricted to free cells; never all zero (the free states
     nearest in the Gaussian's metric take the mass when it covers none). A pose so far
-    from the map that its distance to it overflows is refused (``NonFiniteResultError``)."""
+    from the map that its distance to it overflows is refused (``NonFiniteResultError``),
+    ``out`` (as ``uniform_over_free``'s) then untouched."""
     _check_model(model)
     x, y, yaw = check_pose("pose", (x, y, yaw))
     cov = _covariance_3x3(covariance)
@@ -44,14 +57,19 @@ def gaussian_prior(model: GridModel, x: float, y: float, yaw: float,
     except np.linalg.LinAlgError:
         raise InvalidInputError(f"covariance: singular to rounding once the grid's own "
                                 f"spread is added: {short(cov)}") from None
-    exponent = _prior_exponent(model, (x, y, yaw), information)
-    # Walls and unknown space out: inf there, exp() makes them 0.
-    exponent[:, ~model.free] = np.inf
-    lowest = exponent.min()
+    # The lowest exponent over the free states first, a layer at a time: a refused prior
+    # writes nothing.
+    lowest = min(float(np.min(layer, where=model.free, initial=np.inf))
+                 for layer in _prior_layers(model, (x, y, yaw), information))
     if not math.isfinite(lowest):   # NaN or inf anywhere: min is NaN, or inf everywhere
         raise NonFiniteResultError(f"x, y, covariance: the pose ({x:g}, {y:g}) is too far "
                                    f"from the map (or the covariance too extreme) for a "
                                    f"finite prior")
+    exponent = _belief_array(model, out)
+    for k, layer in enumerate(_prior_layers(model, (x, y, yaw), information)):
+        exponent[k] = layer
+    # Walls and unknown space out: inf there, exp() makes them 0.
+    exponent[:, ~model.free] = np.inf
     # In place, one tensor: a real building's prior is hundreds of MB. The most likely
     # free state gets exp(0) = 1, so the sum is never 0: where the Gaussian covers no free
     # cell, the free states nearest in its metric take the mass.
@@ -62,19 +80,17 @@ def gaussian_prior(model: GridModel, x: float, y: float, yaw: float,
     return belief
 
 
-def _prior_exponent(model: GridModel, pose: tuple[float, float, float],
-                    information: np.ndarray) -> FloatArray:
-    """The Gaussian's exponent d' I d for every state, built a heading layer at a time
-    (the temporaries are of one layer, not of the whole belief)."""
+def _prior_layers(model: GridModel, pose: tuple[float, float, float],
+                  information: np.ndarray) -> Iterator[FloatArray]:
+    """The Gaussian's exponent d' I d for every state, a heading layer at a time (the
+    temporaries are of one layer, not of the whole belief)."""
     x, y, yaw = pose
     xs, ys = model.cell_centres()
-    exponent = np.empty(model.shape)
     with np.errstate(over="ignore", invalid="ignore"):
         dx = (xs - x)[None, :]
         dy = (ys - y)[:, None]
         planar = (information[0, 0] * dx * dx + information[1, 1] * dy * dy
                   + 2 * information[0, 1] * dx * dy)
         across = 2 * information[0, 2] * dx + 2 * information[1, 2] * dy
-        for k, dyaw in enumerate(_wrap(model.headings() - yaw)):
-            np.add(planar, dyaw * (information[2, 2] * dyaw + across), out=exponent[k])
-    return exponent
+        for dyaw in _wrap(model.headings() - yaw):
+            yield planar + dyaw * (information[2, 2] * dyaw + across)

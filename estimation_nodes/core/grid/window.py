@@ -40,7 +40,12 @@ from scipy import ndimage
 from estimation_nodes.core.grid import failure
 from estimation_nodes.core.errors import ZeroEvidenceError
 from estimation_nodes.core.grid.correction import _weighted
-from estimation_nodes.core.grid.laser import _scan_log_likelihood, _scan_log_likelihood_strided
+from estimation_nodes.core.grid.laser import (
+    _scan_log_likelihood,
+    ScanReads,
+    _scan_log_likelihood_cells,
+    _scan_reads,
+)
 from estimation_nodes.core.grid.model import GridModel
 from estimation_nodes.core.grid.motion import OdometryNoise, _motion_noise, _reaching_taps
 from estimation_nodes.core.validation import FloatArray
@@ -70,27 +75,44 @@ def support_box(belief: FloatArray) -> Box | None:
 #: Supports closer than this many cells share a window: a window of its own costs a pass
 #: of each step, worth it only for a mode apart from the rest.
 JOIN_CELLS = 8
-#: More separate supports than this are held in one window (their bounding box).
+#: At most this many windows: more groups of supports are joined with their nearest
+#: (``support_boxes``).
 MAX_WINDOWS = 12
 
 
 def support_boxes(footprint: np.ndarray) -> list[Box]:
     """Disjoint boxes holding every True cell of ``footprint`` (H, W): one per group of
-    cells within JOIN_CELLS of each other (at most MAX_WINDOWS, else one box of all);
-    empty when there is none."""
-    if not footprint.any():
+    cells within JOIN_CELLS of each other; empty when there is none.
+
+    More groups than MAX_WINDOWS (a global start's belief after its first scans, a kidnap
+    lattice's many kept states) are joined with their nearest, the distance that joins
+    two groups doubled until at most MAX_WINDOWS are left: the windows then hold the
+    groups and what lies between near ones, not the building's box."""
+    whole = support_box(footprint[None])
+    if whole is None:
         return []
-    joined = ndimage.binary_dilation(footprint, iterations=JOIN_CELLS // 2)
+    reach = JOIN_CELLS // 2
+    # The groups within the support's box grown by the reach: the same as over the grid,
+    # at the cost of the box (a tracked robot's few metres, not the building).
+    rows, cols = footprint.shape
+    r0, c0 = max(whole[0] - reach, 0), max(whole[2] - reach, 0)
+    near = footprint[r0:min(whole[1] + reach, rows), c0:min(whole[3] + reach, cols)]
+    joined = ndimage.binary_dilation(near, iterations=reach)
     labels, count = ndimage.label(joined, structure=np.ones((3, 3)))
     if count > MAX_WINDOWS:
-        box = support_box(footprint[None])
-        assert box is not None
-        return [box]
+        # The dilation's reach as a distance (taxicab: its cross-shaped steps).
+        r0 = c0 = 0
+        near = footprint
+        distance = ndimage.distance_transform_cdt(~footprint, metric="taxicab")
+        while count > MAX_WINDOWS:
+            reach *= 2
+            labels, count = ndimage.label(distance <= reach, structure=np.ones((3, 3)))
     boxes = []
-    for found in ndimage.find_objects(labels * footprint):
+    for found in ndimage.find_objects(labels * near):
         if found is not None:
-            rows, cols = found
-            boxes.append((rows.start, rows.stop, cols.start, cols.stop))
+            box_rows, box_cols = found
+            boxes.append((r0 + box_rows.start, r0 + box_rows.stop, c0 + box_cols.start,
+                          c0 + box_cols.stop))
     return disjoint(boxes)
 
 
@@ -213,6 +235,11 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     cost of scoring that part, not every state. (The next prediction's blur spreads
     what the lattice finds.)
 
+    A window's heading layers without probability are not scored (their posterior is 0
+    whatever the scan), and the lattice's states are scored as a list
+    (``laser._scan_log_likelihood_cells``): the passes follow the states that can hold
+    probability, not the boxes' and the lattice's tensors.
+
     The lattice's posterior within the boxes joins theirs; outside them its states of
     probability ``floor`` or more are kept (``Correction.kept``) and the rest, all below
     the floor, left out (``Correction.left_out``, the whole renormalized over the rest).
@@ -220,53 +247,180 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     With ``predicted`` (the predicted pose) the lattice's states around it also give the
     posterior of the odometry failing (``failure.astray_in``: ``Correction.astray``).
     """
-    step = KIDNAP_STEP
-    lattice_free = lattice_cells(model, phase)
-    free_states = int(lattice_free.sum()) * -(-model.heading_bins // step)
-    lls = [_scan_log_likelihood(model, ranges, angles, compiled, box) for box in boxes]
-    lattice_ll = None
-    if share > 0.0 and free_states > 0:
-        lattice_ll = _scan_log_likelihood_strided(model, ranges, angles, step, compiled,
-                                                  cells=lattice_free)
-    for ll in [*lls, *([lattice_ll] if lattice_ll is not None else [])]:
+    reads = _scan_reads(model, ranges, angles)
+    held = [_held_headings(prior) for prior in priors]
+    lls = [_scan_log_likelihood(model, ranges, angles, compiled, box, headings, reads)
+           for box, headings in zip(boxes, held)]
+    held_priors = [prior if headings is None else prior[headings]
+                   for prior, headings in zip(priors, held)]
+    for ll in lls:
         if weight != 1.0:
             np.multiply(ll, weight, out=ll)
-    peak = max(float(ll[prior > 0].max(initial=-math.inf)) for ll, prior in zip(lls, priors))
-    if lattice_ll is not None:
-        peak = max(peak, float(np.max(lattice_ll, where=lattice_free[None],
-                                      initial=-math.inf)))
+    peak = max((float(np.max(ll, where=prior > 0, initial=-math.inf))
+                for ll, prior in zip(lls, held_priors)), default=-math.inf)
+    parts = _weighted_parts(lls, held_priors, priors, held, peak, 1.0 - share)
+    total = sum(float(part.sum()) for part in parts)
+    lattice = _lattice_weights(model, reads, boxes, phase, weight, share, floor, peak, total,
+                               compiled, predicted)
+    if lattice is not None and lattice.peak > peak:
+        # A lattice state beats the windows' best: every weight relative to it.
+        scale = math.exp(peak - lattice.peak) if math.isfinite(peak) else 0.0
+        for part in parts:
+            part *= scale
+        total *= scale
+        peak = lattice.peak
     if not math.isfinite(peak):
         raise ZeroEvidenceError("every state with probability rules the scan out")
-    parts = []
-    for ll, prior in zip(lls, priors):
-        weighted, _ = _weighted(ll, peak, prior)
-        if share > 0.0:
-            weighted *= 1.0 - share
-        parts.append(weighted)
-    total = sum(float(part.sum()) for part in parts)
     astray = None
-    if lattice_ll is not None:
-        lattice, found = _weighted(lattice_ll, peak, lattice_free)
-        total += found * share / free_states
+    if lattice is not None:
+        lattice.relative_to(peak)
+        total += float(lattice.weights.sum())
         if predicted is not None and total > 0.0:
-            astray = failure.astray_in(model, lattice, step, lattice_free, total,
-                                      predicted)
-        lattice *= share / free_states
+            astray = failure.astray_in(model, lattice.weights / lattice.per_state,
+                                      lattice.rows, lattice.cols, total, predicted)
     if not total > 0.0:
         raise ZeroEvidenceError("every state with probability rules the scan out")
     log_evidence = peak + math.log(total)
     for part in parts:
         part /= total
-    if lattice_ll is None:
+    if lattice is None:
         return Correction(parts, boxes, _no_states(), log_evidence, 0.0)
-    lattice /= total
-    kept, left_out, kidnapped = _lattice_into(parts, boxes, lattice, floor)
+    weights = lattice.weights / total
+    kept, left_out, kidnapped = _lattice_into(parts, boxes, weights, lattice.rows,
+                                              lattice.cols, floor)
+    # The states not scored to the end, at their bounds: neither probability is understated.
+    unscored = lattice.unscored / total
+    left_out += unscored
+    kidnapped += unscored
     if left_out > 0.0:
         remaining = sum(float(part.sum()) for part in parts) + float(kept[3].sum())
         for part in parts:
             part /= remaining
         kept = (kept[0], kept[1], kept[2], kept[3] / remaining)
     return Correction(parts, boxes, kept, log_evidence, left_out, kidnapped, astray)
+
+
+def _weighted_parts(lls: list[FloatArray], held_priors: list[FloatArray],
+                    priors: list[FloatArray], held: list[np.ndarray | None], peak: float,
+                    scale: float) -> list[FloatArray]:
+    """Each window's prior x exp(log likelihood - peak) x scale, over all its headings
+    (0 at those not scored), written over the log likelihoods; zeros where ``peak`` is
+    -inf (no state with probability explains the scan at all)."""
+    parts = []
+    for ll, prior, whole, headings in zip(lls, held_priors, priors, held):
+        if not math.isfinite(peak):
+            parts.append(np.zeros_like(whole))
+            continue
+        weighted, _ = _weighted(ll, peak, prior)
+        if scale != 1.0:
+            weighted *= scale
+        if headings is not None:
+            part = np.zeros_like(whole)
+            part[headings] = weighted
+            weighted = part
+        parts.append(weighted)
+    return parts
+
+
+#: A lattice state outside the windows is scored beam by beam only while its bound (the
+#: beams so far, every beam left a perfect hit) could give it belief_floor x this share of
+#: the posterior: below that it would be dropped, and its bound is what it may hold.
+UNSCORED_SHARE = 1e-3
+
+
+@dataclass
+class LatticeWeights:
+    """The kidnap lattice's part of a correction: its listed cells (rows, columns), the
+    weight share / states x exp(log likelihood) of each of its states scored to the end
+    (0 for the others; their weights' sum is at most ``unscored``), and the largest log
+    likelihood among the scored (the weights relative to ``peak`` once ``relative_to``
+    ran)."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    weights: FloatArray
+    scored: np.ndarray
+    #: How many states were not scored to the end, and the largest of their bounds.
+    unscored_count: int
+    unscored_peak: float
+    per_state: float
+    peak: float
+    unscored: float = 0.0
+
+    def relative_to(self, peak: float) -> None:
+        """Weights relative to ``peak``: the scored states' from their log likelihoods, the
+        others' 0 and their sum bounded by their count x their largest bound."""
+        scored = np.flatnonzero(self.scored)
+        flat = self.weights.reshape(-1)
+        values = flat[scored]
+        np.subtract(values, peak, out=values)
+        np.exp(values, out=values)
+        values *= self.per_state
+        flat[:] = 0.0
+        flat[scored] = values
+        if self.unscored_count:
+            self.unscored = self.per_state * self.unscored_count * math.exp(
+                self.unscored_peak - peak)
+
+
+#: The lattice parts' cells of the maps in use: (free, phase) -> their rows and columns.
+_lattice_lists: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+
+
+def _lattice_list(model: GridModel, phase: int) -> tuple[np.ndarray, np.ndarray]:
+    """The rows and columns (of the grid) of ``lattice_cells(model, phase)``: made once
+    per map and part, not at every update."""
+    key = (id(model.free), phase % KIDNAP_PHASES)
+    cached = _lattice_lists.get(key)
+    if cached is None or cached[0] is not model.free:
+        if len(_lattice_lists) >= 4 * KIDNAP_PHASES:
+            _lattice_lists.clear()
+        rows, cols = (KIDNAP_STEP * index for index in np.nonzero(lattice_cells(model, phase)))
+        rows.flags.writeable = cols.flags.writeable = False     # shared by the updates
+        cached = _lattice_lists[key] = (model.free, rows, cols)
+    return cached[1], cached[2]
+
+
+def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase: int,
+                     weight: float, share: float, floor: float, peak: float,
+                     total: float, compiled: bool = True,
+                     predicted: failure.Pose | None = None) -> LatticeWeights | None:
+    """The lattice part ``phase``'s weighted log likelihoods (None without a share or a
+    free lattice cell). ``peak`` and ``total``: the windows' largest weighted log
+    likelihood and their weights' sum relative to it, which bound the posterior of a
+    lattice state from above: the lattice only adds to the sum."""
+    step = KIDNAP_STEP
+    rows, cols = _lattice_list(model, phase)
+    per_state = share / (rows.size * -(-model.heading_bins // step)) if rows.size else 0.0
+    if not (share > 0.0 and rows.size > 0):
+        return None
+    inside = np.zeros(rows.size, dtype=bool)
+    for r0, r1, c0, c1 in boxes:
+        inside |= (rows >= r0) & (rows < r1) & (cols >= c0) & (cols < c1)
+    below = np.full(rows.size, -math.inf)
+    if floor > 0.0 and total > 0.0 and math.isfinite(peak):
+        # weight x bound < peak + log(floor x share x total / per_state): the posterior
+        # (per_state exp(weight x ll - peak) / total) is below floor x UNSCORED_SHARE.
+        below[~inside] = (peak + math.log(floor * UNSCORED_SHARE * total / per_state)) / weight
+    if predicted is not None:
+        # The odometry-failure component weighs these states far above the kidnap share:
+        # scored to the end within its reach.
+        below[failure.within_reach(model, rows, cols, predicted)] = -math.inf
+    ll, scored = _scan_log_likelihood_cells(model, reads, step, rows, cols, below,
+                                            compiled)
+    if weight != 1.0:
+        np.multiply(ll, weight, out=ll)
+    unscored_count = scored.size - int(np.count_nonzero(scored))
+    unscored_peak = float(np.max(ll, where=~scored, initial=-math.inf))
+    lattice_peak = float(np.max(ll, where=scored, initial=-math.inf))
+    return LatticeWeights(rows, cols, ll, scored, unscored_count, unscored_peak, per_state,
+                          lattice_peak)
+
+
+def _held_headings(prior: FloatArray) -> np.ndarray | None:
+    """The heading layers of ``prior`` with probability, or None when every one has."""
+    held = np.flatnonzero(prior.any(axis=(1, 2)))
+    return None if held.size == prior.shape[0] else held
 
 
 @dataclass
@@ -293,27 +447,28 @@ def _no_states() -> States:
 
 
 def _lattice_into(parts: list[FloatArray], boxes: list[Box], lattice: FloatArray,
+                  rows: np.ndarray, cols: np.ndarray,
                   floor: float) -> tuple[States, float, float]:
-    """Add the lattice's posterior within each box to that box's part; of the rest, the
-    states of ``floor`` or more (headings, rows, columns, probabilities) and the
-    probability of those left out; and the lattice's whole posterior probability."""
+    """Add the lattice's posterior (every KIDNAP_STEP-th heading at the cells (rows[n],
+    cols[n])) within each box to that box's part; of the rest, the states of ``floor``
+    or more (headings, rows, columns, probabilities) and the probability of those left
+    out; and the lattice's whole posterior probability."""
     step = KIDNAP_STEP
-    covered = np.zeros(lattice.shape[1:], dtype=bool)
+    covered = np.zeros(rows.size, dtype=bool)
     inside = 0.0
     for part, (r0, r1, c0, c1) in zip(parts, boxes):
-        # The lattice rows and columns within the box, and where they fall in it.
-        i0, i1 = -(-r0 // step), -(-r1 // step)
-        j0, j1 = -(-c0 // step), -(-c1 // step)
-        within = lattice[:, i0:i1, j0:j1]
-        part[::step, step * i0 - r0::step, step * j0 - c0::step] += within
-        inside += float(within.sum())
-        covered[i0:i1, j0:j1] = True
-    # Passes over the lattice (an eighth of the building's states) kept to two: a sum and
-    # a comparison.
+        within = np.flatnonzero((rows >= r0) & (rows < r1) & (cols >= c0) & (cols < c1))
+        if within.size == 0:
+            continue
+        # The cells are distinct, so the fancy-indexed += adds each once.
+        values = lattice[:, within]
+        part[::step, rows[within] - r0, cols[within] - c0] += values
+        inside += float(values.sum())
+        covered[within] = True
     chosen = lattice >= floor if floor > 0 else lattice > 0
-    chosen &= ~covered[None]
-    k, i, j = np.nonzero(chosen)
-    values = lattice[k, i, j]
+    chosen[:, covered] = False
+    k, n = np.nonzero(chosen)
+    values = lattice[k, n]
     everything = float(lattice.sum())
     left_out = max(everything - inside - float(values.sum()), 0.0)
-    return (step * k, step * i, step * j, values), left_out, everything
+    return (step * k, rows[n], cols[n], values), left_out, everything
