@@ -10,11 +10,14 @@ from rclpy.node import Node
 
 
 def status_array(node: Node, title: str, values: Mapping[str, Any],
-                 problems: Sequence[str]) -> DiagnosticArray:
+                 problems: Sequence[str], error: bool = False) -> DiagnosticArray:
     """``node``'s status named ``<node name>: title``: WARN with the problems as its message
-    when there are any, OK otherwise; the values as key-value pairs; stamped now."""
+    when there are any (ERROR with ``error``: the node cannot do its job), OK otherwise; the
+    values as key-value pairs; stamped now."""
+    level = DiagnosticStatus.ERROR if error else \
+        DiagnosticStatus.WARN if problems else DiagnosticStatus.OK
     status = DiagnosticStatus(
-        level=DiagnosticStatus.WARN if problems else DiagnosticStatus.OK,
+        level=level,
         name=f"{node.get_name()}: {title}",
         message="; ".join(problems) or "ok",
         hardware_id=node.get_fully_qualified_name(),

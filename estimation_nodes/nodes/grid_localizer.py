@@ -52,6 +52,7 @@ from std_msgs.msg import Float64
 from std_srvs.srv import Empty, Trigger
 
 from estimation_nodes.core import errors
+from estimation_nodes.core.grid import failure
 from estimation_nodes.core.grid.model import GridModel
 from estimation_nodes.core.grid.localization import (ODOMETRY_HISTORY, GridLocalization,
                                                      OdometryStep)
@@ -133,6 +134,9 @@ class GridLocalizer(ManagedNode):
         self._laser_mounts: dict[str, tuple[float, float, float]] = {}
         self._pending_initial_pose: PoseWithCovarianceStamped | None = None
         self._force_update = False
+        #: Localized, uncertain or lost, and why (core/grid/failure.py), as of the last
+        #: estimate published: /diagnostics goes out at once when it changes.
+        self.standing: tuple[failure.Standing, str] | None = None
         self.start_if_asked()
 
     # --- lifecycle ---------------------------------------------------------------------------
@@ -502,6 +506,12 @@ class GridLocalizer(ManagedNode):
                                                 stamp_msg))
         if self._cloud_pub.get_subscription_count():
             self._cloud_pub.publish(self._particle_cloud(stamp_msg))
+        was = self.standing
+        self.standing = self.localization.standing(estimate, self._settings.quality_radius,
+                                                   self._settings.quality_angle)
+        if was is None or was[0] is not self.standing[0]:
+            # A behaviour tree acts on it: said with this update, not at the next period.
+            self._publish_diagnostics()
         return estimate
 
     def _particle_cloud(self, stamp_msg) -> PoseArray:
@@ -543,6 +553,9 @@ class GridLocalizer(ManagedNode):
                 "last_dropped_probability": f"{self.localization.last_dropped:.3g}",
                 "lost_probability": f"{self.localization.lost_probability:.3g}",
             })
+            if self.standing is not None:
+                values.update({"localization_state": self.standing[0].value,
+                               "localization_reason": self.standing[1]})
             if math.isfinite(self.localization.log_evidence):
                 values["last_log_evidence"] = f"{self.localization.log_evidence:.4f}"
             if math.isfinite(self.last_update_s):
@@ -559,6 +572,9 @@ class GridLocalizer(ManagedNode):
             values.update({f"tf_dropped.{k}": v
                            for k, v in sorted(self._tf_listener.dropped.items())})
         problems = ["messages rejected"] if self.rejected else []
+        lost = self.standing is not None and self.standing[0] is failure.Standing.LOST
+        if self.standing is not None and self.standing[0] is not failure.Standing.LOCALIZED:
+            problems.insert(0, f"{self.standing[0].value}: {self.standing[1]}")
         missed_now = self.scan_gaps.missed - self._missed_reported
         self._missed_reported = self.scan_gaps.missed
         if missed_now:
@@ -568,7 +584,7 @@ class GridLocalizer(ManagedNode):
             problems.append(f"falling behind the laser: updating {100 * busy:.0f}% of the "
                             f"time, newer scans replace those waiting")
         self._diagnostics_pub.publish(status_array(self, "grid localization", values,
-                                                   problems))
+                                                   problems, error=lost))
 
 
 main = main_for(GridLocalizer)

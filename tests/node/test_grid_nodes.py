@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped, PoseWithCovarianceStamped
 from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.parameter import Parameter
@@ -12,6 +12,7 @@ from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Float64
 from std_srvs.srv import Trigger
 
+from estimation_nodes.core.grid import failure
 from estimation_nodes.nodes.grid_localizer import GridLocalizer
 from estimation_nodes.nodes.grid_messages import fill_pose, planar_pose
 from estimation_nodes.nodes.parameters import ConfigurationError
@@ -225,18 +226,23 @@ def test_scans_the_localizer_never_saw_are_counted_and_reported(nodes, executor,
                                             driver.messages["/diagnostics"]), 10.0)
 
 
-def test_initial_pose_then_global_localization(nodes, executor, collector_factory):
-    localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=72)
-    driver = collector_factory({"localization_quality": Float64}, name="driver")
-    initial = driver.node.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
-    assert spin_until(executor, lambda: initial.get_subscription_count() == 1, 10.0)
+def corridor_initial_pose() -> PoseWithCovarianceStamped:
+    """(4.05, 2.05, 0) in the corridor, 0.1 m and 0.03 rad sure."""
     msg = PoseWithCovarianceStamped()
     fill_pose(msg.pose.pose, 4.05, 2.05, 0.0)
     cov = np.zeros((6, 6))
     cov[0, 0] = cov[1, 1] = 0.01
     cov[5, 5] = 0.001
     msg.pose.covariance = cov.ravel().tolist()
-    initial.publish(msg)
+    return msg
+
+
+def test_initial_pose_then_global_localization(nodes, executor, collector_factory):
+    localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=72)
+    driver = collector_factory({"localization_quality": Float64}, name="driver")
+    initial = driver.node.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
+    assert spin_until(executor, lambda: initial.get_subscription_count() == 1, 10.0)
+    initial.publish(corridor_initial_pose())
     assert spin_until(executor, lambda: localizer.handled["initialpose"] == 1, 5.0)
     # Latched with depth 1: the driver may get the start-up quality or only the latest.
     assert spin_until(executor, lambda: driver.count("localization_quality") >= 1
@@ -247,6 +253,42 @@ def test_initial_pose_then_global_localization(nodes, executor, collector_factor
     assert spin_until(executor, future.done, 5.0) and future.result().success
     assert spin_until(executor, lambda: driver.messages["localization_quality"][-1].data < 0.01,
                       5.0)
+
+
+def test_diagnostics_say_localized_or_lost_and_why_when_it_changes(nodes, executor,
+                                                                  collector_factory):
+    """The state goes out on /diagnostics with the estimate that changed it, not at the
+    next period (an hour here): localized from an initial pose, lost once the belief is
+    uniform again, with the reason and ERROR."""
+    localizer = nodes(GridLocalizer, map_file=CORRIDOR, heading_bins=72,
+                      diagnostics_period=3600.0)
+    driver = collector_factory({"/diagnostics": (DiagnosticArray, 10)}, name="driver")
+    initial = driver.node.create_publisher(PoseWithCovarianceStamped, "initialpose", 10)
+    assert spin_until(executor, lambda: initial.get_subscription_count() == 1, 10.0)
+
+    def said(state):
+        for msg in driver.messages["/diagnostics"]:
+            values = {v.key: v.value for v in msg.status[0].values}
+            if values.get("localization_state") == state:
+                return msg.status[0], values
+        return None
+
+    initial.publish(corridor_initial_pose())
+    assert spin_until(executor, lambda: said("localized") is not None, 5.0)
+    status, values = said("localized")
+    assert status.level == DiagnosticStatus.OK and "of the belief within 0.3 m" \
+        in values["localization_reason"]
+    client = driver.node.create_client(Trigger, "/grid_localizer/global_localization")
+    assert client.wait_for_service(timeout_sec=5.0)
+    future = client.call_async(Trigger.Request())
+    assert spin_until(executor, future.done, 5.0) and future.result().success
+    assert spin_until(executor, lambda: said("lost") is not None
+                      and driver.messages["/diagnostics"][-1] is not None, 5.0)
+    status, values = said("lost")
+    assert status.level == DiagnosticStatus.ERROR
+    assert "uniform over the free cells" in values["localization_reason"]
+    assert status.message.startswith("lost: no scan since")
+    assert localizer.standing[0] is failure.Standing.LOST
 
 
 def test_a_map_from_the_topic_and_a_bad_one(nodes, executor, collector_factory):

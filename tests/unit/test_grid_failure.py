@@ -143,9 +143,63 @@ def test_a_place_found_again_after_a_kidnapping_is_doubted_then_confirmed():
     before, behind, found, after = updates[5:12], updates[12], updates[13], updates[14:]
     assert all(u["quality"] > 0.99 and u["error"] < 0.1 for u in before), before
     assert behind["error"] > 4.0       # the scan after the kidnapping is explained there
+    # ... but a place around the predicted pose explains it better: the odometry may have
+    # failed (4.4 m is a large odometry error for the model: some doubt, not most), and
+    # the covariance reaches the robot.
+    assert behind["quality"] < 0.9 and behind["d2"] < CHI2_999
     assert found["error"] < 0.1 and found["quality"] < 0.5 and found["doubt"] > 0.99
     np.testing.assert_allclose([u["doubt"] for u in after[:3]], [0.5, 0.25, 0.125],
                                rtol=1e-3)
     assert after[2]["quality"] > 0.8 and after[2]["error"] < 0.1
     # Where the place is doubted the covariance covers the robot anywhere in proportion.
     assert found["d2"] < CHI2_999
+
+
+def test_the_odometry_failing_is_a_mixture_component_scored_on_the_lattice_around():
+    """astray_in against the sums written out: the component's prior spread over the
+    lattice states within ASTRAY_RADIUS_M of the predicted pose (as distance to the
+    -ASTRAY_FALL, most of it on the predicted heading), its posterior against the rest
+    of the mixture's evidence, its states where the scan fits."""
+    model = corridor_settings().model
+    step = 2
+    rows, cols = (step * index for index in np.nonzero(model.free[::step, ::step]))
+    headings = model.headings()[::step]
+    rng = np.random.default_rng(5)
+    weights = rng.random((headings.size, rows.size))
+    centre, tracked = (3.0, 1.6, 0.5), 0.7
+    found = failure.astray_in(model, weights, rows, cols, tracked, centre)
+    xs, ys = model.cell_centres()
+    x, y = xs[cols], ys[rows]
+    distance = np.hypot(x - centre[0], y - centre[1])
+    places = np.where(distance <= failure.ASTRAY_RADIUS_M,
+                      np.maximum(distance, failure.ASTRAY_NEAR_M) ** -failure.ASTRAY_FALL, 0)
+    same = np.array([abs(math.remainder(h - centre[2], 2 * math.pi)) <= failure.ASTRAY_TURN_RAD
+                     for h in headings])
+    bearings = np.where(same, failure.ASTRAY_SAME_HEADING / same.sum(),
+                        (1 - failure.ASTRAY_SAME_HEADING) / (~same).sum())
+    prior = bearings[:, None] * (places / places.sum())[None]
+    assert prior.sum() == pytest.approx(1.0)
+    share = failure.ASTRAY_PROBABILITY * float((weights * prior).sum())
+    expected = share / (share + (1 - failure.ASTRAY_PROBABILITY) * tracked)
+    assert found.mass == pytest.approx(expected, rel=1e-9)
+    assert np.all(np.hypot(found.x - centre[0], found.y - centre[1])
+                  <= failure.ASTRAY_RADIUS_M + 1e-9)
+    # its states are the posterior's: their mean x as the disc's posterior mean x (but the
+    # states below ASTRAY_KEPT of the largest, left out)
+    posterior = weights * prior
+    mean_x = float((posterior.sum(axis=0) * x).sum() / posterior.sum())
+    assert float(found.p @ found.x) / found.mass == pytest.approx(mean_x, rel=1e-4)
+
+
+def test_the_odometry_failure_fades_and_moves_with_the_robot():
+    earlier = failure.Astray(np.array([1.0]), np.array([2.0]), np.array([math.pi / 2]),
+                             np.array([0.4]))
+    new = failure.Astray(np.array([5.0]), np.array([5.0]), np.array([0.0]), np.array([0.2]))
+    after = earlier.faded(new, (0.0, 0.5, 0.0))      # 0.5 m ahead, facing +y
+    assert after.mass == pytest.approx(0.2 + 0.8 * 0.4 * (1 - failure.RECOVERY))
+    np.testing.assert_allclose([after.x[1], after.y[1]], [1.0, 2.5], atol=1e-12)
+    # its probability near a pose, and its second moment about it
+    assert after.near((1.0, 2.5, math.pi / 2), 0.1, 0.1) == pytest.approx(after.p[1])
+    moment = after.about((5.0, 5.0, 0.0))
+    assert moment[0, 0] == pytest.approx(after.p[1] * 16.0)
+    assert moment[1, 1] == pytest.approx(after.p[1] * 2.5 ** 2)

@@ -30,15 +30,31 @@ probability of the update's new mode and left at RECOVERY per update.
 What the localizer publishes takes it in (``GridLocalization.estimate``): the quality
 is (1 - doubt) x the belief's mass near the pose, and the covariance the mixture's:
 (1 - doubt) x the belief's + doubt x that of the robot anywhere on the free cells
-(``anywhere_around``), both about the pose. A scan that fits the wrong place as well as
-the right one (a corridor whose doors repeat, the odometry wrong along it) renews
-nothing: no estimate made from these scans could tell.
+(``anywhere_around``), both about the pose.
+
+The odometry fails more often than the robot is carried off: wheels slip, an encoder
+runs backwards, and the prediction then carries the belief to a place the motion noise
+cannot leave, where the scans are explained by whatever fits there least badly (a
+corridor's repeating doors: issue 38's backwards odometry, its error 1.5 to 2.7 m with a
+quality up to 0.92). The model holds a third component for it, ``Astray``: with
+ASTRAY_PROBABILITY at each update the odometry failed and the robot is within
+ASTRAY_RADIUS_M of the predicted pose, nearer places the likelier (``_astray_prior``).
+Its posterior is that of any mixture component: the prior share times the scan's
+likelihood averaged under that prior, against the tracked belief's evidence: near
+nothing where the tracked belief explains the scan as well as the places around it, most
+of the mass where a place near it explains it many nats better. The states of the disc
+are scored anyway (the kidnap share's lattice, grid/window.py); they are not kept in the
+belief (a disc of metres in the windows would cost the building): the belief goes on as
+the posterior given that the odometry held, and what is published is the mixture's, the
+component's mass and second moment taken in (``Astray.about``), faded by RECOVERY at
+each update as the doubt.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
@@ -54,6 +70,50 @@ RECOVERY = 0.5
 #: beyond them: a most likely state further from the last one moved by the odometry
 #: was not carried there by the motion.
 REACH_SIGMAS, REACH_CELLS = 3.0, 2.0
+#: The prior probability, at each update, that the odometry failed since the last one
+#: and the robot is within ASTRAY_RADIUS_M (m) of the predicted pose. Measured on the
+#: fault bench (bench/grid_faults.py): 0.1 left an ACES corridor's backwards odometry
+#: published with quality 0.87 at 1.5 m off; 0.3 would say lost on the unfaulted ACES
+#: log where its corridors repeat.
+ASTRAY_PROBABILITY = 0.25
+ASTRAY_RADIUS_M = 8.0
+#: Its prior's shape (``_astray_prior``): the distance below which it is as likely as at
+#: it, how fast it falls with distance beyond, and the share of it on headings within
+#: ASTRAY_TURN_RAD of the predicted one.
+ASTRAY_NEAR_M = 0.5
+ASTRAY_FALL = 3.0
+ASTRAY_TURN_RAD = math.radians(30.0)
+ASTRAY_SAME_HEADING = 0.8
+
+
+class Standing(Enum):
+    """What the localizer says of itself (``/diagnostics``), from the quality it publishes
+    (the belief's mass near the pose, with every doubt above taken in)."""
+
+    LOCALIZED = "localized"
+    UNCERTAIN = "uncertain"
+    LOST = "lost"
+
+
+#: The published quality from which the localizer is localized, and below which it is
+#: lost (uncertain between): the quality of nav2-minded consumers' "sure" and "lost"
+#: (bench/real_logs.py's confidently wrong takes 0.8).
+SURE_QUALITY, LOST_QUALITY = 0.8, 0.5
+
+
+def standing_of(quality: float) -> Standing:
+    if quality >= SURE_QUALITY:
+        return Standing.LOCALIZED
+    return Standing.UNCERTAIN if quality >= LOST_QUALITY else Standing.LOST
+
+
+#: Why the most likely place is doubted, by what made the doubt (``Doubt``).
+class Doubt(Enum):
+    NONE = "none"
+    #: The posterior came through the kidnap share: a place found anywhere on the map.
+    FOUND_ANYWHERE = "the scan fits a place found anywhere on the map, not yet confirmed"
+    #: The most likely state left the prediction's reach.
+    JUMPED = "the most likely pose jumped beyond the motion's reach, not yet confirmed"
 
 
 def judged(doubt: float, kidnapped: float, jumped: bool) -> float:
@@ -64,15 +124,19 @@ def judged(doubt: float, kidnapped: float, jumped: bool) -> float:
     return new + (1.0 - new) * doubt * (1.0 - RECOVERY)
 
 
+def moved(before: Pose, delta: tuple[float, float, float]) -> Pose:
+    """``before`` moved by ``delta`` (rot1, trans, rot2), as the prediction moves it."""
+    rot1, trans, rot2 = delta
+    return (before[0] + trans * math.cos(before[2] + rot1),
+            before[1] + trans * math.sin(before[2] + rot1), before[2] + rot1 + rot2)
+
+
 def jumped(model: GridModel, noise: OdometryNoise, before: Pose,
            delta: tuple[float, float, float], after: Pose) -> bool:
     """Whether ``after`` is beyond the prediction's reach from ``before`` moved by
     ``delta`` (rot1, trans, rot2): further than REACH_SIGMAS of the motion noise and
     REACH_CELLS cells in position, or as many heading bins in heading."""
-    rot1, trans, rot2 = delta
-    x = before[0] + trans * math.cos(before[2] + rot1)
-    y = before[1] + trans * math.sin(before[2] + rot1)
-    yaw = before[2] + rot1 + rot2
+    x, y, yaw = moved(before, delta)
     sigma_cells, sigma_bins = _motion_noise(delta, noise, model)
     reach_m = (REACH_SIGMAS * sigma_cells + REACH_CELLS) * model.resolution
     reach_rad = (REACH_SIGMAS * sigma_bins + REACH_CELLS) * model.bin_width
@@ -106,3 +170,120 @@ def anywhere_around(spread: Spread, pose: tuple[float, float, float]) -> FloatAr
     turns = np.remainder(spread.headings - pose[2] + math.pi, 2 * math.pi) - math.pi
     moment[2, 2] = float(np.mean(turns ** 2))
     return moment
+
+
+#: Of the odometry-failure component, the states kept: those of at least this share of
+#: its most probable one (the rest, the disc's far tails, are below any quality).
+ASTRAY_KEPT = 1e-6
+#: A component of less probability is left out (its second moment, 8 m away at most,
+#: then adds below 0.01 m^2 to the covariance).
+ASTRAY_NEGLIGIBLE = 1e-4
+
+
+@dataclass(frozen=True)
+class Astray:
+    """The robot's place should the odometry have failed (the module's docstring): its
+    states (x, y, yaw) and their probabilities (``mass`` in all, the component's
+    posterior probability)."""
+
+    x: FloatArray
+    y: FloatArray
+    yaw: FloatArray
+    p: FloatArray
+
+    @staticmethod
+    def none() -> "Astray":
+        empty = np.zeros(0)
+        return Astray(empty, empty, empty, empty)
+
+    @property
+    def mass(self) -> float:
+        return float(self.p.sum())
+
+    def faded(self, new: "Astray", delta: tuple[float, float, float] | None) -> "Astray":
+        """After an update with the motion ``delta`` whose component is ``new``: it, and
+        this one moved by ``delta`` in the rest of the probability, faded by RECOVERY (as
+        the doubt)."""
+        keep = (1.0 - new.mass) * (1.0 - RECOVERY)
+        old = self.p * keep
+        held = old >= ASTRAY_KEPT * float(old.max(initial=0.0))
+        x, y, yaw = self.x[held], self.y[held], self.yaw[held]
+        if delta is not None:
+            rot1, trans, rot2 = delta
+            x, y = x + trans * np.cos(yaw + rot1), y + trans * np.sin(yaw + rot1)
+            yaw = yaw + rot1 + rot2
+        return Astray(*(np.concatenate(pair) for pair in
+                        ((new.x, x), (new.y, y), (new.yaw, yaw), (new.p, old[held]))))
+
+    def _offsets(self, pose: Pose) -> tuple[FloatArray, FloatArray, FloatArray]:
+        return (self.x - pose[0], self.y - pose[1],
+                np.remainder(self.yaw - pose[2] + math.pi, 2 * math.pi) - math.pi)
+
+    def about(self, pose: Pose) -> FloatArray:
+        """The component's second moment of (x, y, yaw) about ``pose``, times its mass."""
+        offsets = np.stack(self._offsets(pose))
+        return (offsets * self.p) @ offsets.T
+
+    def near(self, pose: Pose, radius: float, angle: float) -> float:
+        """The component's probability within ``radius`` and ``angle`` of ``pose``."""
+        dx, dy, turn = self._offsets(pose)
+        return float(self.p[(np.hypot(dx, dy) <= radius) & (np.abs(turn) <= angle)].sum())
+
+
+def within_reach(model: GridModel, rows: np.ndarray, cols: np.ndarray,
+                 centre: Pose) -> np.ndarray:
+    """Which of the cells (rows[n], cols[n]) are within ASTRAY_RADIUS_M of ``centre``."""
+    xs, ys = model.cell_centres()
+    return np.hypot(xs[cols] - centre[0], ys[rows] - centre[1]) <= ASTRAY_RADIUS_M
+
+
+def astray_in(model: GridModel, weights: FloatArray, rows: np.ndarray, cols: np.ndarray,
+              tracked: float, centre: Pose) -> Astray:
+    """The odometry-failure component after a correction: ``weights``, the scan's
+    likelihood (relative to a peak) at the kidnap lattice's states (k, n): heading bin
+    KIDNAP_STEP k (every other one) at the cell (rows[n], cols[n]); ``tracked`` the rest
+    of the mixture's evidence on the same scale, and ``centre`` the predicted pose.
+
+    The component's prior over the lattice states within ASTRAY_RADIUS_M (``_astray_prior``):
+    a density over the disc as distance ** -ASTRAY_FALL from ASTRAY_NEAR_M on (an error
+    of a metre far likelier than one of several: the scans of a long corridor repeat
+    every few metres, and an unfaulted log's tracked belief then meets places that fit
+    better 4 to 7 m off), its heading within ASTRAY_TURN_RAD of the predicted one with
+    ASTRAY_SAME_HEADING of the probability (wheels that slip or run backwards keep the
+    heading; a robot carried off does not)."""
+    xs, ys = model.cell_centres()
+    inside = np.flatnonzero(within_reach(model, rows, cols, centre))
+    if inside.size == 0:
+        return Astray.none()
+    step = -(-model.heading_bins // weights.shape[0])
+    headings = model.headings()[::step]
+    x, y = xs[cols[inside]], ys[rows[inside]]
+    bearings, near = _astray_prior(np.hypot(x - centre[0], y - centre[1]),
+                                   headings - centre[2])
+    scores = weights[:, inside]
+    total = float(bearings @ (scores @ near))
+    if not total > 0.0:
+        return Astray.none()
+    share = ASTRAY_PROBABILITY * total
+    mass = share / (share + (1.0 - ASTRAY_PROBABILITY) * tracked)
+    if mass < ASTRAY_NEGLIGIBLE:
+        return Astray.none()
+    posterior = scores * bearings[:, None] * near[None, :]
+    k, n = np.nonzero(posterior >= ASTRAY_KEPT * float(posterior.max()))
+    p = posterior[k, n]
+    return Astray(x[n], y[n], headings[k], p * (mass / p.sum()))
+
+
+def _astray_prior(distance: FloatArray,
+                  turns: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The odometry-failure component's prior over the lattice states (heading k, cell n)
+    within its reach (``distance``: each cell's from the predicted pose; ``turns``: each
+    heading's offset from the predicted one), as the product of a distribution over the
+    headings and one over the cells."""
+    places = np.maximum(distance, ASTRAY_NEAR_M) ** -ASTRAY_FALL
+    places /= places.sum()
+    same = np.abs(np.remainder(turns + math.pi, 2 * math.pi) - math.pi) <= ASTRAY_TURN_RAD
+    bearings = np.where(same, ASTRAY_SAME_HEADING / max(int(same.sum()), 1),
+                        (1.0 - ASTRAY_SAME_HEADING) / max(int((~same).sum()), 1))
+    bearings /= bearings.sum()
+    return bearings, places

@@ -30,7 +30,11 @@ What ``estimate`` publishes carries a doubt on the most likely place (grid/failu
 the kidnap share's posterior probability at each update, all of it when the most
 likely state jumped beyond the prediction's reach, halved by each update that does not
 renew it, plus what belief_floor dropped (``lost_probability``): the quality is that
-much lower, the covariance that much the robot's anywhere on the free cells.
+much lower, the covariance that much the robot's anywhere on the free cells. With
+belief_floor and a kidnap share it also carries the posterior of the odometry having
+failed (``failure.Astray``: the robot anywhere within metres of the predicted pose),
+scored on the kidnap lattice's states around the predicted pose: the quality that much
+lower, the covariance that component's second moment added.
 
 Each method checks what it is given (a pose of three finite numbers, a scan of
 readings as ``laser.check_scan`` says, a stamp that is an integer) and raises
@@ -89,6 +93,7 @@ from estimation_nodes.core.validation import (
 )
 
 Pose = tuple[float, float, float]
+UNIFORM = "the belief was made uniform over the free cells (no initial pose)"
 #: Odometry poses kept to find the one of a scan's time (at 50 Hz, 4 s).
 ODOMETRY_HISTORY = 200
 
@@ -165,7 +170,12 @@ class GridLocalization:
         #: place it is about (the last update's most likely pose), and where the robot is
         #: if it is not there: anywhere on the free cells.
         self.doubt = 0.0
+        self.doubt_cause = failure.Doubt.NONE
         self._mode: Pose | None = None
+        #: The odometry-failure component's posterior, faded over the updates.
+        self.astray = failure.Astray.none()
+        #: What the belief was made from before any scan (``standing`` says it).
+        self._started = UNIFORM
         self._anywhere = failure.spread_of(model)
         #: The odometry pose at the last update (None: no update yet) and the latest one.
         self._reference: Pose | None = None
@@ -182,6 +192,7 @@ class GridLocalization:
         self._hold(uniform_over_free(self.model, out=self.belief))
         self.log_evidence = float("nan")
         self._forget_doubt()
+        self._started = UNIFORM
 
     def set_prior(self, pose: Pose, covariance: FloatArray) -> None:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
@@ -191,11 +202,14 @@ class GridLocalization:
         prior = gaussian_prior(self.model, x, y, yaw, covariance, out=self.belief)
         self._hold(prior)
         self._forget_doubt()
+        self._started = "the initial pose"
 
     def _forget_doubt(self) -> None:
         """A prior given (or none: uniform) is the belief's whole answer: no new mode in
         it, and none to compare the next update's with."""
         self.doubt, self._mode = 0.0, None
+        self.doubt_cause = failure.Doubt.NONE
+        self.astray = failure.Astray.none()
 
     def _hold(self, belief: FloatArray) -> None:
         """Take ``belief`` over the whole grid as the belief: with belief_floor > 0 without
@@ -312,10 +326,14 @@ class GridLocalization:
         delta = None if self._reference is None else odometry_delta(self._reference, pose)
         weight = 1.0 if self._independent_beams is None else \
             scan_weight(self._independent_beams, ranges.size)
+        predicted = None if delta is None or self._mode is None else \
+            failure.moved(self._mode, delta)
+        astray = failure.Astray.none()
         if self._floor > 0.0:
-            correction = self._windowed_step(ranges, angles, delta, weight)
+            correction = self._windowed_step(ranges, angles, delta, weight, predicted)
             self._hold_windows(correction)
             log_evidence, kidnapped = correction.log_evidence, correction.kidnapped
+            astray = correction.astray or astray
         else:
             posterior, log_evidence, kidnapped = self._dense_step(ranges, angles, delta,
                                                                   weight)
@@ -324,7 +342,12 @@ class GridLocalization:
         mode = self._most_likely_pose()
         jumped = delta is not None and self._mode is not None and failure.jumped(
             self.model, self.noise, self._mode, delta, mode)
-        self.doubt = failure.judged(self.doubt, kidnapped, jumped)
+        doubt = failure.judged(self.doubt, kidnapped, jumped)
+        if doubt - self.doubt * (1.0 - failure.RECOVERY) > self.doubt * (1.0 - failure.RECOVERY):
+            # What this update brought outweighs what is left of the earlier doubt.
+            self.doubt_cause = failure.Doubt.JUMPED if jumped else failure.Doubt.FOUND_ANYWHERE
+        self.doubt = doubt
+        self.astray = self.astray.faded(astray, delta)
         self._mode = mode
         self._reference = pose
         self._last_scan = (ranges, angles)
@@ -365,7 +388,7 @@ class GridLocalization:
 
     def _windowed_step(self, ranges: FloatArray, angles: FloatArray,
                        delta: tuple[float, float, float] | None,
-                       weight: float) -> window.Correction:
+                       weight: float, predicted: Pose | None = None) -> window.Correction:
         """The steps over the windows: each grown by what the motion reaches (those that
         then overlap joined), predicted on its own and normalized together, then
         corrected together (window.correct_boxes)."""
@@ -381,7 +404,8 @@ class GridLocalization:
             total = sum(left for _, left in spreads)
             priors = [_normalized(spread, total) for spread, _ in spreads]
         return window.correct_boxes(priors, boxes, self.model, ranges, angles, weight,
-                                    self._kidnap, self._floor, phase=self.updates)
+                                    self._kidnap, self._floor, phase=self.updates,
+                                    predicted=predicted)
 
     @property
     def window_states(self) -> int:
@@ -414,13 +438,39 @@ class GridLocalization:
             fitted = scan_fit.fitted_pose(model.scan_fit, pose, *self._last_scan,
                                           model.resolution, model.bin_width)
             estimate = Estimate(fitted, estimate.covariance, estimate.quality)
-        doubt = self.lost_probability
+        astray = self.astray
+        if astray.mass > 0.0:
+            estimate = Estimate(estimate.pose,
+                                (1.0 - astray.mass) * estimate.covariance
+                                + astray.about(estimate.pose),
+                                (1.0 - astray.mass) * estimate.quality
+                                + astray.near(estimate.pose, radius, angle))
+        doubt = 1.0 - (1.0 - self.doubt) * (1.0 - self.last_dropped)
         if doubt == 0.0:
             return estimate
         return Estimate(estimate.pose,
                         (1.0 - doubt) * estimate.covariance
                         + doubt * failure.anywhere_around(self._anywhere, estimate.pose),
                         (1.0 - doubt) * estimate.quality)
+
+    def standing(self, estimate: Estimate, radius: float,
+                 angle: float) -> tuple[failure.Standing, str]:
+        """Localized, uncertain or lost (``failure.standing_of`` the published quality of
+        ``estimate``, made with ``radius`` and ``angle``), and why, in words."""
+        state = failure.standing_of(estimate.quality)
+        near = f"within {radius:g} m and {math.degrees(angle):g} deg of the pose"
+        if state is failure.Standing.LOCALIZED:
+            return state, f"{estimate.quality:.2f} of the belief {near}"
+        if self._mode is None:
+            return state, f"no scan since {self._started}"
+        doubts = {self.doubt_cause.value: self.doubt,
+                  "the scan fits a place around the predicted pose better than the tracked "
+                  "one: the odometry may have failed": self.astray.mass,
+                  "belief_floor dropped part of the belief": self.last_dropped}
+        reason, share = max(doubts.items(), key=lambda pair: pair[1])
+        if share < 0.5 * (1.0 - estimate.quality):
+            reason = f"the belief is spread: {estimate.quality:.2f} of it {near}"
+        return state, f"{reason} (lost_probability {self.lost_probability:.2f})"
 
     def _most_likely_pose(self) -> Pose:
         """The belief's mean around its most likely state (the pose ``estimate`` refines)."""
@@ -431,9 +481,9 @@ class GridLocalization:
     @property
     def lost_probability(self) -> float:
         """The probability that the most likely place does not hold the robot: the doubt
-        on it (grid/failure.py), or that the robot was in what belief_floor dropped at the
-        last update."""
-        return 1.0 - (1.0 - self.doubt) * (1.0 - self.last_dropped)
+        on it (grid/failure.py), that the odometry failed (``astray``), or that the robot
+        was in what belief_floor dropped at the last update."""
+        return 1.0 - (1.0 - self.doubt) * (1.0 - self.last_dropped) * (1.0 - self.astray.mass)
 
     def _around(self, windows: list, box: window.Box, belief: FloatArray, pose: Pose,
                 radius: float, angle: float) -> Estimate:

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from estimation_nodes.core.grid import failure
 from estimation_nodes.core.errors import ZeroEvidenceError
 from estimation_nodes.core.grid.correction import _weighted
 from estimation_nodes.core.grid.laser import (
@@ -224,7 +225,8 @@ def lattice_cells(model: GridModel, phase: int) -> np.ndarray:
 
 def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
                   ranges: FloatArray, angles: FloatArray, weight: float, share: float,
-                  floor: float, compiled: bool = True, phase: int = 0) -> Correction:
+                  floor: float, compiled: bool = True, phase: int = 0,
+                  predicted: failure.Pose | None = None) -> Correction:
     """The correction of a belief held in disjoint ``boxes`` (``priors``: each box's part,
     zero elsewhere). With ``share`` > 0 the prior is (1 - share) x that belief plus
     ``share`` spread evenly over the free states of a coarse lattice's part ``phase``
@@ -241,6 +243,9 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     The lattice's posterior within the boxes joins theirs; outside them its states of
     probability ``floor`` or more are kept (``Correction.kept``) and the rest, all below
     the floor, left out (``Correction.left_out``, the whole renormalized over the rest).
+
+    With ``predicted`` (the predicted pose) the lattice's states around it also give the
+    posterior of the odometry failing (``failure.astray_in``: ``Correction.astray``).
     """
     reads = _scan_reads(model, ranges, angles)
     held = [_held_headings(prior) for prior in priors]
@@ -256,7 +261,7 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     parts = _weighted_parts(lls, held_priors, priors, held, peak, 1.0 - share)
     total = sum(float(part.sum()) for part in parts)
     lattice = _lattice_weights(model, reads, boxes, phase, weight, share, floor, peak, total,
-                               compiled)
+                               compiled, predicted)
     if lattice is not None and lattice.peak > peak:
         # A lattice state beats the windows' best: every weight relative to it.
         scale = math.exp(peak - lattice.peak) if math.isfinite(peak) else 0.0
@@ -266,9 +271,13 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
         peak = lattice.peak
     if not math.isfinite(peak):
         raise ZeroEvidenceError("every state with probability rules the scan out")
+    astray = None
     if lattice is not None:
         lattice.relative_to(peak)
         total += float(lattice.weights.sum())
+        if predicted is not None and total > 0.0:
+            astray = failure.astray_in(model, lattice.weights / lattice.per_state,
+                                      lattice.rows, lattice.cols, total, predicted)
     if not total > 0.0:
         raise ZeroEvidenceError("every state with probability rules the scan out")
     log_evidence = peak + math.log(total)
@@ -288,7 +297,7 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
         for part in parts:
             part /= remaining
         kept = (kept[0], kept[1], kept[2], kept[3] / remaining)
-    return Correction(parts, boxes, kept, log_evidence, left_out, kidnapped)
+    return Correction(parts, boxes, kept, log_evidence, left_out, kidnapped, astray)
 
 
 def _weighted_parts(lls: list[FloatArray], held_priors: list[FloatArray],
@@ -374,7 +383,8 @@ def _lattice_list(model: GridModel, phase: int) -> tuple[np.ndarray, np.ndarray]
 
 def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase: int,
                      weight: float, share: float, floor: float, peak: float,
-                     total: float, compiled: bool = True) -> LatticeWeights | None:
+                     total: float, compiled: bool = True,
+                     predicted: failure.Pose | None = None) -> LatticeWeights | None:
     """The lattice part ``phase``'s weighted log likelihoods (None without a share or a
     free lattice cell). ``peak`` and ``total``: the windows' largest weighted log
     likelihood and their weights' sum relative to it, which bound the posterior of a
@@ -392,6 +402,10 @@ def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase
         # weight x bound < peak + log(floor x share x total / per_state): the posterior
         # (per_state exp(weight x ll - peak) / total) is below floor x UNSCORED_SHARE.
         below[~inside] = (peak + math.log(floor * UNSCORED_SHARE * total / per_state)) / weight
+    if predicted is not None:
+        # The odometry-failure component weighs these states far above the kidnap share:
+        # scored to the end within its reach.
+        below[failure.within_reach(model, rows, cols, predicted)] = -math.inf
     ll, scored = _scan_log_likelihood_cells(model, reads, step, rows, cols, below,
                                             compiled)
     if weight != 1.0:
@@ -423,6 +437,8 @@ class Correction:
     #: The posterior probability of the kidnap share (0 without one): that the scan was
     #: explained by a place the robot was carried to, not by the tracked belief.
     kidnapped: float = 0.0
+    #: The odometry-failure component's posterior (grid/failure.py), where asked for.
+    astray: failure.Astray | None = None
 
 
 def _no_states() -> States:
