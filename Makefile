@@ -33,6 +33,9 @@ $(BIN)/python:
 $(STAMP): $(BIN)/python $(SOURCES)
 	rm -rf build
 	$(BIN)/python -m pip install --quiet --upgrade ".[test]"
+	# numba's kernels compiled once into its cache: a node's first start and the suite then
+	# load them (compiling them all takes 20 s on an idle machine, minutes on a busy one).
+	$(BIN)/python -m estimation_nodes.core.compiled_loader
 	touch $@
 
 install: $(STAMP)

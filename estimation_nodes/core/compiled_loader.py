@@ -55,3 +55,22 @@ def interrupts_held_through_callbacks() -> Iterator[None]:
         sys.unraisablehook = previous_hook
     if swallowed:
         raise KeyboardInterrupt
+
+
+#: Every feature's kernel module.
+KERNEL_MODULES = ("estimation_nodes.core.tiles.compiled", "estimation_nodes.core.kalman.compiled",
+                  "estimation_nodes.core.grid.compiled", "estimation_nodes.core.fusion.compiled")
+
+
+def warm_all() -> list[str]:
+    """Compile every feature's kernels into numba's cache (beside the installed modules):
+    the kernel modules that imported. Run once after an install (the Makefile does), so a
+    node's first start and the tests load them instead of compiling (tens of seconds on a
+    busy machine)."""
+    return [module for module in KERNEL_MODULES if load_kernels(module) is not None]
+
+
+if __name__ == "__main__":
+    warmed = warm_all()
+    print(f"numba kernels compiled into the cache: {len(warmed)} of {len(KERNEL_MODULES)}")
+

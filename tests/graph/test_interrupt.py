@@ -64,6 +64,18 @@ def first_moment() -> float:
     return max(0.2, 2 * (time.monotonic() - started))
 
 
+def takes_sigint(pid: int) -> bool:
+    """Whether the process catches or blocks SIGINT (/proc's SigCgt, SigBlk): before the
+    interpreter installs its handler, a SIGINT kills any Python program outright, which no
+    code of ours can change; "loading" begins once it can be taken."""
+    bit = 1 << (signal.SIGINT - 1)
+    with contextlib.suppress(OSError):
+        fields = dict(line.split(":\t", 1) for line in
+                      Path(f"/proc/{pid}/status").read_text().splitlines() if ":\t" in line)
+        return bool((int(fields["SigCgt"], 16) | int(fields["SigBlk"], 16)) & bit)
+    return False
+
+
 def children_of(pid: int) -> list[int]:
     path = Path(f"/proc/{pid}/task/{pid}/children")
     with contextlib.suppress(OSError):
@@ -195,8 +207,8 @@ def wait_for_moment(watched: Watched, moment: str, first_moment: float, name: st
     constructor on, parameters, map and kernels still being made), or ``running`` (it
     printed ``ready``)."""
     if moment == "loading":
-        watched.wait_for(lambda: time.monotonic() - watched.started >= first_moment, "start",
-                         limit)
+        watched.wait_for(lambda: time.monotonic() - watched.started >= first_moment
+                         and takes_sigint(watched.process.pid), "start", limit)
     elif moment == "in_the_graph":
         watched.wait_for(lambda: name in watcher.node.get_node_names(), "node in the graph",
                          limit, spin=lambda: spin_until(executor, lambda: False, 0.02))
@@ -225,8 +237,8 @@ def test_ctrl_c_of_the_demo_exits_130_quietly_leaving_nothing(ros_env, tmp_path,
         # Each wait only gives a hang a limit; the signal goes at the condition.
         limit = 90.0
         if moment == "loading":
-            demo.wait_for(lambda: time.monotonic() - demo.started >= first_moment,
-                          "start", limit)
+            demo.wait_for(lambda: time.monotonic() - demo.started >= first_moment
+                          and takes_sigint(demo.process.pid), "start", limit)
         elif moment == "first_node_starting":
             demo.wait_for(lambda: len(demo.children) >= 1, "first node", limit)
         elif moment == "last_node_starting":

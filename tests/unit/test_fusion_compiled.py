@@ -17,6 +17,11 @@ WEIGHTS = UnscentedWeights()
 SEEDS = range(12)
 
 
+# The module's fixture compiles every fusion kernel where numba's cache lacks them (an
+# install the Makefile did not warm): minutes with both cores busy.
+pytestmark = pytest.mark.timeout(600)
+
+
 @pytest.fixture(scope="module", autouse=True)
 def kernels_compiled():
     assert steps.prepare_compiled(), "numba is a dependency; it must import"
