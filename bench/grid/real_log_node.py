@@ -416,8 +416,8 @@ def summary(log, watcher: Watcher, rate: float, played_s: float, peak: float,
         ["received / updates / not due (no motion)", f"{d.get('scans_received', '?')} / "
          f"{handled} / {not_due}"],
         ["rejected", ", ".join(f"{k[9:]} {v}" for k, v in rejected.items()) or "none"],
-        ["update, median / max (node's own)", f"{d.get('update_ms_median', '?')} / "
-         f"{d.get('update_ms_max', '?')} ms"],
+        ["update, median / p99 / max (node's own)", f"{d.get('update_ms_median', '?')} / "
+         f"{d.get('update_ms_p99', '?')} / {d.get('update_ms_max', '?')} ms"],
         ["localizer peak RSS (VmHWM)", f"{peak:.0f} MiB"],
         *pose_rows(watcher.poses, truth, "corrected pose"),
         *([] if not laser_ahead else [

@@ -61,8 +61,11 @@ def test_the_localizer_finds_the_simulated_robot_without_an_initial_pose(nodes, 
     nodes(PlanarRobot, map_file=CORRIDOR, seed=3, rate_hz=20.0)
     assert spin_until(executor, lambda: localizer.localization is not None
                       and localizer.localization.updates >= 15, 60.0)
-    # Every update's duration is kept for /diagnostics' median and maximum.
+    # Every update's duration is kept for /diagnostics' median, 99th percentile, maximum.
     assert len(localizer.update_times) == localizer.handled["scan"] >= 15
+    figures = localizer.update_time_figures()
+    assert 0 < figures["median"] <= figures["p99"] <= figures["max"] \
+        == max(localizer.update_times) * 1e3
     # The truth when the last scan used was taken: the pose carries that scan's stamp.
     last = seen.messages["pose"][-1]
     truths = {(m.header.stamp.sec, m.header.stamp.nanosec): m for m in seen.messages["true_pose"]}
