@@ -118,9 +118,12 @@ def passes_of(poses: list[PoseWithCovarianceStamped]) -> list[dict[int, tuple]]:
     return passes
 
 
-#: The localizer's parameters in the test (the rest its defaults).
+#: The localizer's parameters in the test (the rest its defaults). history_depth: the
+#: pose publisher keeps every pose of a pass until the test's subscriber has it (with the
+#: default 1, a pose not yet acknowledged is replaced by the next, and the test would take
+#: its scan for one the localizer left out).
 PARAMETERS = {"map_file": str(CORRIDOR), "heading_bins": 36, "autostart": True,
-              "use_sim_time": True}
+              "use_sim_time": True, "history_depth": 100}
 
 
 @pytest.mark.timeout(180)
