@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(1, str(Path(__file__).resolve().parents[2]))  # the repository: bench
-from bench.common import confine_ros, end_run, executable, table, wait_for_line  # noqa: E402
+from bench.common import confine_ros, end_run, executable, table  # noqa: E402
 from bench.grid.real_buildings import LOGS, RANGE_MAX  # noqa: E402
 from bench.grid.real_log_node import Watcher, peak_mib, pose_rows, prepare  # noqa: E402
 
@@ -76,14 +76,8 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
                               v.key == "busy_percent"), 10)
     robot = None
     try:
-        if not wait_for_line(localizer, work / "localizer.log", "ready:", 300):
-            sys.exit("laser_rate_node: the localizer never said ready:\n"
-                     + (work / "localizer.log").read_text())
-        watcher.spin(lambda: watcher.initial.get_subscription_count() > 0 and watcher.poses,
-                     60)
-        count = len(watcher.poses)
-        watcher.give_initial_pose(start)
-        watcher.spin(lambda: len(watcher.poses) > count, 30)
+        watcher.start_localizer_at(localizer, work / "localizer.log", start,
+                                   "laser_rate_node")
         robot = subprocess.Popen(
             [executable("planar_robot"), "--ros-args", *grid, "-p", "seed:=3",
              "-p", f"rate_hz:={args.rate_hz}", "-p", f"beams:={BEAMS}",

@@ -230,6 +230,18 @@ class Watcher:
     def spin(self, condition, timeout: float) -> bool:
         return spin_until(self.executor, condition, timeout)
 
+    def start_localizer_at(self, localizer, log_path: Path, pose: tuple[float, float, float],
+                           bench: str) -> None:
+        """Once the localizer (its output in ``log_path``) is ready and publishing, give it
+        ``pose`` as the initial pose and wait for its answer; exit naming ``bench`` if it
+        never gets ready."""
+        if not wait_for_line(localizer, log_path, "ready:", 300):
+            sys.exit(f"{bench}: the localizer never said ready:\n" + log_path.read_text())
+        self.spin(lambda: self.initial.get_subscription_count() > 0 and self.poses, 60)
+        count = len(self.poses)
+        self.give_initial_pose(pose)
+        self.spin(lambda: len(self.poses) > count, 30)
+
 
 @dataclass
 class Played:
@@ -289,14 +301,8 @@ def play(args: argparse.Namespace, log_path: Path, work: Path,
     try:
         if args.tf:
             watcher.activate("grid_localizer")
-        if not wait_for_line(localizer, work / "localizer.log", "ready:", 300):
-            sys.exit("real_log_node: the localizer never said ready:\n"
-                     + (work / "localizer.log").read_text())
-        watcher.spin(lambda: watcher.initial.get_subscription_count() > 0 and watcher.poses,
-                     60)
-        count = len(watcher.poses)
-        watcher.give_initial_pose(behind(log.scans[0].pose, laser_ahead))
-        watcher.spin(lambda: len(watcher.poses) > count, 30)
+        watcher.start_localizer_at(localizer, work / "localizer.log",
+                                   behind(log.scans[0].pose, laser_ahead), "real_log_node")
         inputs = ["/scan", "/tf", "/tf_static", "--clock"] if args.tf else ["/scan", "/odom"]
         play_command = [executable("estimation_play"), str(recording), "--rate", f"{rate:g}",
                         "--topics", *inputs, "--wait-for-subscribers", "30", "--delay", "2"]
