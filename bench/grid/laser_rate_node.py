@@ -48,7 +48,7 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
     from estimation_nodes.nodes.qos import latched_qos
 
     start = carmen.read_log(log_path).scans[0].pose
-    _, map_yaml = prepare(log_path, work)
+    _, map_yaml = prepare(log_path, work, laser_ahead=0.0)
     env = confine_ros(90)
     grid = ["-p", f"map_file:={map_yaml}", "-p", "resolution:=0.1", "-p", "heading_bins:=72",
             "-p", f"laser_max_range:={RANGE_MAX}"]
