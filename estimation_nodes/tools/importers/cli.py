@@ -204,7 +204,7 @@ def import_rosbag(bag: Path, out: Path, topics: set[str] | None) -> list[str]:
     types not installed here left out and said."""
     from rclpy.serialization import serialize_message
 
-    from estimation_nodes.tools.recording.bags import bag_messages, is_bag
+    from estimation_nodes.tools.recording.bags import bag_messages, is_bag, left_out_notes
 
     if not is_bag(bag):
         raise RecordingError(f"{bag}: not a ROS 1 bag (.bag) or a rosbag2 folder "
@@ -220,9 +220,7 @@ def import_rosbag(bag: Path, out: Path, topics: set[str] | None) -> list[str]:
         writer.write(topic, serialize_message(msg), stamp, stamp)
         counts[topic] += 1
     writer.close()
-    notes = [f"{topic} left out: its type {type_name} is not installed here"
-             for topic, type_name in sorted(left_out.items())]
-    return _report(counts, Counter(), notes)
+    return _report(counts, Counter(), left_out_notes(left_out))
 
 
 def _dead_reckoned(pose, twist, dt: float):

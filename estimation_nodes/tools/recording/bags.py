@@ -98,6 +98,12 @@ def bag_messages(path: Path, topics: set[str] | None = None, as_rclpy: bool = Tr
         raise RecordingError(f"{path} is not a bag rosbags can read: {error}") from None
 
 
+def left_out_notes(left_out: dict[str, str]) -> list[str]:
+    """A line per topic ``bag_messages`` left out (``left_out``: topic -> type)."""
+    return [f"{topic} left out: its type {type_name} is not installed here"
+            for topic, type_name in sorted(left_out.items())]
+
+
 def _installed_classes(connections: list, left_out: dict[str, str] | None) -> dict[str, type]:
     """The rclpy class of each connection's type that this install has; the others'
     topics noted in ``left_out``."""

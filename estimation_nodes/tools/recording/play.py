@@ -91,16 +91,15 @@ def read_raw(path: Path, only: set[str] | None = None) -> list[Recorded]:
 def _read_bag(path: Path, only: set[str] | None) -> list[Recorded]:
     from rclpy.serialization import serialize_message
 
-    from estimation_nodes.tools.recording.bags import bag_messages
+    from estimation_nodes.tools.recording.bags import bag_messages, left_out_notes
 
     if not path.exists():
         raise RecordingError(f"{path}: no such bag")
     left_out: dict[str, str] = {}
     messages = [Recorded(stamp, topic, type_name, serialize_message(msg))
                 for stamp, topic, type_name, msg in bag_messages(path, only, left_out=left_out)]
-    for topic, type_name in sorted(left_out.items()):
-        print(f"estimation_play: {topic} left out: its type {type_name} is not installed "
-              f"here", file=sys.stderr)
+    for note in left_out_notes(left_out):
+        print(f"estimation_play: {note}", file=sys.stderr)
     return messages
 
 
