@@ -54,7 +54,7 @@ from std_srvs.srv import Empty, Trigger
 from estimation_nodes.core import errors
 from estimation_nodes.core.grid import failure
 from estimation_nodes.core.grid.model import GridModel
-from estimation_nodes.core.grid.localization import (ODOMETRY_HISTORY, GridLocalization,
+from estimation_nodes.core.grid.localization import (GridLocalization,
                                                      OdometryStep)
 from estimation_nodes.core.transforms.buffer import (Extrapolation, LookupFailed,
                                                      TransformBuffer)
@@ -92,9 +92,11 @@ SCAN_WAIT_CHECK_S = 0.05
 #: the first of each pair (4 of Intel's 889 updates at its own rate). Bounded, so late
 #: odometry cannot queue more catching up than a second of a 10 Hz laser.
 WAITING_SCANS = 10
-#: Odometry messages queued for the localizer: 20 s at 10 Hz, 4 s at 50 Hz, so an update
-#: that keeps it busy loses none (a lost one would move the next update's prediction).
-ODOM_DEPTH = ODOMETRY_HISTORY
+#: Odometry messages queued while an update runs: 10 s at 200 Hz, so an update that keeps
+#: the localizer busy loses none. A lost run of them makes the next one look like a jump
+#: past max_odom_jump, dropped (a real log's odometry plays at 160 Hz beside a 10 Hz laser:
+#: 200 messages were 1.25 s, which a loaded machine's update outlasted).
+ODOM_DEPTH = 2000
 #: Updates whose durations /diagnostics summarizes (the latest ones).
 UPDATE_TIMES_KEPT = 1000
 #: Updating this share of the time or more is falling behind the laser: a scan that comes

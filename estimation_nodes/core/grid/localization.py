@@ -94,8 +94,9 @@ from estimation_nodes.core.validation import (
 
 Pose = tuple[float, float, float]
 UNIFORM = "the belief was made uniform over the free cells (no initial pose)"
-#: Odometry poses kept to find the one of a scan's time (at 50 Hz, 4 s).
-ODOMETRY_HISTORY = 200
+#: Odometry poses kept to find the one of a scan's time: 5 s at 200 Hz, more than a scan
+#: waits for its odometry (odom_wait) at any rate a robot publishes it.
+ODOMETRY_HISTORY = 1000
 
 
 @dataclass(frozen=True)
