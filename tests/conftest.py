@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import subprocess
+import warnings
 from collections import defaultdict
 from pathlib import Path
 
@@ -55,14 +56,67 @@ def domain_id():
 
 
 @pytest.fixture
-def ros_env(domain_id, monkeypatch):
-    """Environment for child processes, and the same settings for this process."""
+def ros_env(domain_id, monkeypatch, request):
+    """Environment for child processes, and the same settings for this process. A process
+    of the test's domain still running after the test (its other fixtures have ended
+    theirs) is ended by its pid and named in a warning: it could otherwise answer a later
+    test that gets the same domain with a latched sample of this one."""
     monkeypatch.setenv("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     monkeypatch.setenv("ROS_DOMAIN_ID", str(domain_id))
     monkeypatch.delenv("ROS_LOCALHOST_ONLY", raising=False)
     env = dict(os.environ)
     env["PYTHONUNBUFFERED"] = "1"
-    return env
+    yield env
+    left = end_processes_of_domain(domain_id)
+    if left:
+        warnings.warn(LeftBehind(f"{request.node.nodeid} left processes of its ROS domain "
+                                 f"{domain_id} running (ended here): {left}"), stacklevel=2)
+
+
+class LeftBehind(UserWarning):
+    """A test's child process that outlived the test."""
+
+
+#: How long a process of the domain may take to end after its test (a child still
+#: shutting down after its parent was stopped) before it is killed.
+LEFT_BEHIND_GRACE_S = 10.0
+
+
+def processes_of_domain(domain_id: int) -> dict[int, str]:
+    """This user's processes (other than this one) whose environment has the domain: pid
+    -> command line."""
+    wanted = f"ROS_DOMAIN_ID={domain_id}".encode()
+    found = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit() or int(entry.name) == os.getpid():
+            continue
+        try:
+            if wanted not in (entry / "environ").read_bytes().split(b"\0"):
+                continue
+            command = (entry / "cmdline").read_bytes().replace(b"\0", b" ")
+        except OSError:          # gone, or not ours
+            continue
+        found[int(entry.name)] = command.decode(errors="replace").strip()
+    return found
+
+
+def end_processes_of_domain(domain_id: int) -> dict[int, str]:
+    """End, by pid, the processes of the domain still running after a grace: those found."""
+    import signal
+    import time
+
+    found = processes_of_domain(domain_id)
+    deadline = time.monotonic() + LEFT_BEHIND_GRACE_S
+    while found and time.monotonic() < deadline:
+        time.sleep(0.2)
+        found = {pid: command for pid, command in processes_of_domain(domain_id).items()
+                 if pid in found}
+    for pid in found:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    return found
 
 
 @pytest.fixture
