@@ -17,7 +17,10 @@ estimate goes on ``/tf`` too: ``odom -> base_link`` when ``world_frame`` is the 
 frame, ``map -> odom`` (through the tree's ``odom -> base_link`` at the estimate's time)
 when it is the map frame, stamped with the estimate's time plus
 ``transform_time_offset``. A pose on ``set_pose`` (geometry_msgs/PoseWithCovarianceStamped)
-puts the estimate there, as the peer's topic does. With ``print_diagnostics`` the node
+puts the estimate there, as the peer's topic does. With ``use_control`` the velocity
+command on ``cmd_vel`` (geometry_msgs/Twist, taken at its arrival; TwistStamped with
+``stamped_control``, in ``base_link_frame`` or no frame) enters each prediction
+(core/fusion/control.py). With ``print_diagnostics`` the node
 publishes ``/diagnostics`` every second: per input part the measurements applied, rejected
 by the Mahalanobis threshold and dropped, by reason. A clock that jumps back (a bag played
 again) resets the filter, as the peer does. A message with a non-finite value in what it
@@ -31,13 +34,15 @@ from collections.abc import Sequence
 
 import numpy as np
 from nav_msgs.msg import Odometry
-from geometry_msgs.msg import PoseWithCovarianceStamped, TwistWithCovarianceStamped
+from geometry_msgs.msg import (PoseWithCovarianceStamped, Twist, TwistStamped,
+                               TwistWithCovarianceStamped)
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Imu
 
 from estimation_nodes.core.fusion import steps
+from estimation_nodes.core.fusion.control import command_of
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
@@ -89,6 +94,8 @@ class FusionNode(Node):
             raise ConfigurationError(str(error)) from None
         for name in self._config.unsupported:
             self.get_logger().warning(f"parameter {name} is not supported yet: ignored")
+        for note in self._config.notes:
+            self.get_logger().warning(note)
         # The steps' kernels compiled (or loaded from numba's cache) now, not at the
         # first message.
         steps.prepare_compiled()
@@ -107,6 +114,10 @@ class FusionNode(Node):
                                       for sensor in self._config.sensors.values()]
         self._set_pose_subscription = self.create_subscription(
             PoseWithCovarianceStamped, "set_pose", self._on_set_pose, 1)
+        if self._config.settings.control is not None:
+            self._control_subscription = self.create_subscription(
+                TwistStamped if self._config.stamped_control else Twist, "cmd_vel",
+                self._on_command, 10)
         self._timer = self.create_timer(1.0 / self._config.frequency, self._on_timer)
         #: The counts at the last /diagnostics, to say what went wrong since.
         self._reported: dict[str, int] = {}
@@ -152,6 +163,29 @@ class FusionNode(Node):
             return
         self._inputs.mounts[frame] = Mount(rotation_from_quaternion(*t.rotation),
                                            np.asarray(t.translation, dtype=float))
+
+    def _on_command(self, msg: Twist | TwistStamped) -> None:
+        """The robot's velocity command (the peer's control callbacks)."""
+        if isinstance(msg, TwistStamped):
+            if msg.header.frame_id not in ("", self._config.base_link_frame):
+                self._inputs.drop(f"cmd_vel: frame {msg.header.frame_id!r} is not "
+                                  f"{self._config.base_link_frame!r}")
+                self.get_logger().warning(
+                    f"cmd_vel in {msg.header.frame_id!r}, not the robot's "
+                    f"{self._config.base_link_frame!r}: dropped", throttle_duration_sec=5.0)
+                return
+            stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            twist = msg.twist
+        else:
+            stamp_ns, twist = self.get_clock().now().nanoseconds, msg
+        command = command_of(twist)
+        if not all(math.isfinite(v) for v in command):
+            self._inputs.drop("cmd_vel: a non-finite value")
+            self.get_logger().warning("cmd_vel: a non-finite value: dropped",
+                                      throttle_duration_sec=5.0)
+            return
+        assert self._fusion.control is not None
+        self._fusion.control.set(command, stamp_ns)
 
     def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
         """The estimate put at the pose (the peer's set_pose topic)."""

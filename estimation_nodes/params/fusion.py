@@ -13,12 +13,17 @@ from typing import Any
 
 import numpy as np
 
+from estimation_nodes.core.fusion.control import CONTROL_NAMES, CONTROL_SIZE, ControlSettings
 from estimation_nodes.core.fusion.filter import FusionSettings
 from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
-from estimation_nodes.core.fusion.state import STATE_SIZE
+from estimation_nodes.core.fusion.state import AX, STATE_SIZE
 from estimation_nodes.core.fusion.steps import UnscentedWeights
 
+#: The control term's parameters (core/fusion/control.py).
+CONTROL_PARAMETERS = ("use_control", "stamped_control", "control_timeout", "control_config",
+                      "acceleration_limits", "acceleration_gains", "deceleration_limits",
+                      "deceleration_gains")
 #: Parameters read and acted on (beyond the per-sensor ones).
 SUPPORTED = {
     "frequency", "sensor_timeout", "two_d_mode", "map_frame", "odom_frame",
@@ -26,7 +31,7 @@ SUPPORTED = {
     "transform_timeout", "process_noise_covariance", "initial_estimate_covariance",
     "initial_state", "predict_to_current_time", "dynamic_process_noise_covariance",
     "gravitational_acceleration", "alpha", "kappa", "beta", "filter_type",
-    "print_diagnostics", "use_sim_time",
+    "print_diagnostics", "use_sim_time", *CONTROL_PARAMETERS,
 }
 #: Parameters that change nothing a run computes (logging, the peer's launch helpers).
 #: And every rclpy node's own (rclpy declares it; the node reads it from the overrides).
@@ -67,7 +72,13 @@ class FusionConfig:
     two_d_mode: bool = False
     #: Publish /diagnostics (the peer's ``print_diagnostics``, off by default as there).
     print_diagnostics: bool = False
+    #: The velocity command is geometry_msgs/TwistStamped (else Twist, taken at its
+    #: arrival): the peer's ``stamped_control``.
+    stamped_control: bool = False
     unsupported: tuple[str, ...] = field(default_factory=tuple)
+    #: Lines to warn of: what the configuration asked that the filter changed (as the
+    #: peer says them).
+    notes: tuple[str, ...] = field(default_factory=tuple)
 
     def sensor_inputs(self, mounts: dict[str, Mount] | None = None) -> SensorInputs:
         """The inputs of this configuration, with the mounts known so far by frame."""
@@ -152,8 +163,10 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
     initial_state = np.asarray(params.get("initial_state", [0.0] * STATE_SIZE), dtype=float)
     if initial_state.size != STATE_SIZE:
         raise FusionConfigError(f"initial_state: expected {STATE_SIZE} numbers")
+    control, notes = _control(params, sensors, timeout)
     settings = FusionSettings(
         kind=kind,
+        control=control,
         process_noise=_matrix(params, "process_noise_covariance",
                               np.diag([0.05, 0.05, 0.06, 0.03, 0.03, 0.06, 0.025, 0.025,
                                        0.04, 0.01, 0.01, 0.02, 0.01, 0.01, 0.015])),
@@ -177,7 +190,54 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
         gravity=float(params.get("gravitational_acceleration", 9.80665)),
         two_d_mode=bool(params.get("two_d_mode", False)),
         print_diagnostics=bool(params.get("print_diagnostics", False)),
-        unsupported=tuple(unsupported))
+        stamped_control=bool(params.get("stamped_control", False)),
+        unsupported=tuple(unsupported),
+        notes=notes)
+
+
+def _per_velocity(params: dict[str, Any], name: str, default: tuple[float, ...]
+                  ) -> tuple[float, ...]:
+    if name not in params:
+        return default
+    values = np.asarray(params[name], dtype=float).ravel()
+    if values.size != CONTROL_SIZE or not (np.all(np.isfinite(values)) and np.all(values >= 0)):
+        raise FusionConfigError(f"{name}: expected {CONTROL_SIZE} non-negative numbers "
+                                f"({' '.join(CONTROL_NAMES)}), got {list(values)}")
+    return tuple(float(v) for v in values)
+
+
+def _control(params: dict[str, Any], sensors: dict[str, SensorConfig], sensor_timeout: float
+             ) -> tuple[ControlSettings | None, tuple[str, ...]]:
+    """The control term's settings with ``use_control`` (None without), and the lines to
+    warn of. Unlike the peer, a malformed entry is an error, not a term silently off."""
+    if not bool(params.get("use_control", False)):
+        return None, ()
+    if "control_config" not in params:
+        raise FusionConfigError("control_config: use_control is true, so expected "
+                                f"{CONTROL_SIZE} booleans ({' '.join(CONTROL_NAMES)})")
+    controlled = [bool(v) for v in params["control_config"]]
+    if len(controlled) != CONTROL_SIZE:
+        raise FusionConfigError(f"control_config: expected {CONTROL_SIZE} booleans "
+                                f"({' '.join(CONTROL_NAMES)}), got {len(controlled)}")
+    notes = []
+    # An acceleration the IMU measures is not also commanded (the peer's rule and line).
+    for axis in range(3):
+        if controlled[axis] and any(config.kind == "imu" and config.update[AX + axis]
+                                    for config in sensors.values()):
+            controlled[axis] = False
+            notes.append(f"{'XYZ'[axis]} acceleration is being measured from IMU; "
+                         f"{'XYZ'[axis]} velocity control input is disabled")
+    timeout = float(params.get("control_timeout", sensor_timeout))
+    if not timeout > 0:
+        raise FusionConfigError("control_timeout: expected a positive time in s")
+    acceleration_limits = _per_velocity(params, "acceleration_limits", (1.0,) * CONTROL_SIZE)
+    acceleration_gains = _per_velocity(params, "acceleration_gains", (1.0,) * CONTROL_SIZE)
+    settings = ControlSettings(
+        controlled=tuple(controlled), timeout_ns=round(timeout * 1e9),
+        acceleration_limits=acceleration_limits, acceleration_gains=acceleration_gains,
+        deceleration_limits=_per_velocity(params, "deceleration_limits", acceleration_limits),
+        deceleration_gains=_per_velocity(params, "deceleration_gains", acceleration_gains))
+    return settings, tuple(notes)
 
 
 def _offset_ns(params: dict[str, Any]) -> int:

@@ -224,3 +224,42 @@ def test_diagnostics_count_each_inputs_measurements_applied_rejected_and_dropped
     status = collector.messages["/diagnostics"][-1].status[0]
     assert status.level == DiagnosticStatus.WARN
     assert "odom0_twist rejected: 1 since the last report" in status.message
+
+
+@pytest.mark.parametrize("stamped", [False, True])
+def test_cmd_vel_speeds_the_estimate_up_between_measurements(fusion_node, make_node, executor,
+                                                             stamped):
+    """use_control: one odometry reading at rest, then only commands of 1 m/s: the
+    estimate's speed follows them (a TwistStamped in another frame is dropped, counted)."""
+    from geometry_msgs.msg import Twist, TwistStamped
+
+    node = fusion_node("ekf", use_control=True, stamped_control=stamped, control_timeout=0.5,
+                       sensor_timeout=0.05, control_config=[True] + [False] * 5,
+                       acceleration_limits=[2.0] + [0.0] * 5)
+    sender = make_node("commander")
+    wheels = sender.create_publisher(Odometry, "wheel/odom", qos_profile_sensor_data)
+    commands = sender.create_publisher(TwistStamped if stamped else Twist, "cmd_vel", 10)
+    assert spin_until(executor, lambda: wheels.get_subscription_count() > 0
+                      and commands.get_subscription_count() > 0, 10.0)
+    wheels.publish(odom(node.get_clock().now().nanoseconds, 0.0, 0.0))
+    assert spin_until(executor, lambda: node._fusion.initialized, 10.0)
+
+    def command(frame: str = "base_link"):
+        twist = Twist()
+        twist.linear.x = 1.0
+        if not stamped:
+            return twist
+        msg = TwistStamped()
+        msg.header.stamp = node.get_clock().now().to_msg()
+        msg.header.frame_id, msg.twist = frame, twist
+        return msg
+
+    def faster() -> bool:
+        commands.publish(command())
+        return node._fusion.x[6] > 0.3
+
+    assert spin_until(executor, faster, 20.0)
+    if stamped:
+        commands.publish(command("odom"))
+        assert spin_until(executor, lambda: any(
+            "cmd_vel: frame 'odom'" in reason for reason in node._inputs.dropped), 5.0)

@@ -11,6 +11,8 @@
 - ``set_pose(measurement, now)`` puts the estimate where the measurement says.
 - ``differentiate(now)`` is the angular acceleration the IMU's lever arm needs, the
   change of the rates between two periodic steps, as the peer computes it.
+- With ``control`` settings (``use_control``), ``control.set`` takes the velocity
+  command, and each prediction starts with its term (control.py).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from estimation_nodes.core.fusion import steps
+from estimation_nodes.core.fusion.control import Control, ControlSettings
 from estimation_nodes.core.fusion.state import STATE_SIZE, TWIST, VROLL
 from estimation_nodes.core.fusion.steps import Measurement, Rejected, UnscentedWeights
 from estimation_nodes.core.validation import FloatArray
@@ -44,6 +47,8 @@ class FusionSettings:
     predict_to_current_time: bool = False
     dynamic_process_noise: bool = False
     weights: UnscentedWeights = UnscentedWeights()
+    #: The control term's settings (``use_control``), None without it.
+    control: ControlSettings | None = None
 
 
 @dataclass
@@ -81,6 +86,9 @@ class FusionFilter:
         self._last_rates = np.zeros(3)
         self._last_diff_ns: int | None = None
         self.angular_acceleration = np.zeros(3)
+        #: The velocity command and its term (None without ``use_control``); a reset
+        #: forgets the command, as the peer's does.
+        self.control = Control(self.settings.control) if self.settings.control else None
 
     # --- the peer's FilterBase::processMeasurement --------------------------------------
 
@@ -136,9 +144,12 @@ class FusionFilter:
         return dynamic
 
     def predict(self, delta_ns: int) -> None:
-        """Move the estimate ``delta_ns`` forward with the motion model."""
+        """Move the estimate ``delta_ns`` forward with the motion model (from the last
+        measurement time)."""
         dt = delta_ns * 1e-9
         q = self._process_noise()
+        if self.control is not None:
+            self.x = self.control.applied(self.x, dt, self.last_time_ns + delta_ns)
         if self.settings.kind == "ekf":
             self.x, self.p = steps.ekf_predict(self.x, self.p, q, dt)
         else:

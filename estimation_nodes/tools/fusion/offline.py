@@ -17,12 +17,16 @@ from pathlib import Path
 
 import numpy as np
 
+from estimation_nodes.core.fusion.control import command_of
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.sensors import SensorInputs
 from estimation_nodes.params.fusion import FusionConfig, FusionConfigError, fusion_config, \
     parameters_of_file
 from estimation_nodes.tools.recording import bags
+
+#: The velocity command's topic (the peer's, under use_control).
+CONTROL_TOPIC = "cmd_vel"
 
 
 @dataclass
@@ -72,11 +76,25 @@ def run(config: FusionConfig, messages, mounts: dict[str, Mount] | None = None,
         while next_tick <= received_ns:
             tick(next_tick)
             next_tick += period_ns
+        if fusion.control is not None and topic.lstrip("/") == CONTROL_TOPIC:
+            take_command(fusion, msg, received_ns, config.stamped_control)
         for sensor in by_topic.get(topic.lstrip("/"), []):
             sensor_inputs.add(sensor, msg, fusion)
     if next_tick is not None:
         tick(next_tick)
     return FusionRun(fusion, sensor_inputs, outputs, covariances)
+
+
+def take_command(fusion: FusionFilter, msg, received_ns: int, stamped: bool) -> None:
+    """A recorded velocity command into the filter, as the node takes it: a Twist at its
+    arrival, a TwistStamped at its stamp (non-finite ones left out)."""
+    command = command_of(msg.twist if stamped else msg)
+    if not all(math.isfinite(v) for v in command):
+        return
+    stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec if stamped \
+        else received_ns
+    assert fusion.control is not None
+    fusion.control.set(command, stamp_ns)
 
 
 def parse_mount(text: str) -> tuple[str, Mount]:
@@ -108,12 +126,14 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     for name in config.unsupported:
         print(f"estimation_fuse: parameter {name} is not supported yet: ignored")
+    for note in config.notes:
+        print(f"estimation_fuse: {note}")
     if not args.bag.exists():
         print(f"estimation_fuse: {args.bag}: no such bag", file=sys.stderr)
         return 2
-    topics = {s.topic for s in config.sensors.values()} | \
-        {s.topic.lstrip("/") for s in config.sensors.values()} | \
-        {"/" + s.topic.lstrip("/") for s in config.sensors.values()}
+    names = [s.topic for s in config.sensors.values()] + \
+        ([CONTROL_TOPIC] if config.settings.control else [])
+    topics = {t for name in names for t in (name, name.lstrip("/"), "/" + name.lstrip("/"))}
     result = run(config, bag_messages(args.bag, topics), dict(args.mount))
     x = result.fusion.x
     print(f"{config.settings.kind}: final position x {x[0]:.4f} y {x[1]:.4f} z {x[2]:.4f} m, "
