@@ -2,7 +2,7 @@
 
     python bench/grid/real_buildings.py [--log intel|aces|PATH ...] [--scans N]
         [--resolution 0.1] [--heading-bins 72] [--belief-floor F ...] [--profile]
-        [--no-amcl]
+        [--no-amcl] [--without-odometry-failure]
 
 For each CARMEN log (../shared/data/carmen, see its README) a map is made from
 the log's SLAM-corrected poses at 0.05 m (mapping with known poses,
@@ -23,6 +23,10 @@ belief_floor 0 is the exact filter over the whole grid; a floor > 0 drops the
 states of less probability after each correction, and the steps run over the
 bounding box of what is left (core/grid/localization.py says what is dropped).
 Each configuration runs in a fresh process, so the memory figures are its own.
+With ``--without-odometry-failure`` each floor's configuration runs again with
+``odometry_failure_probability`` 0 (the model's odometry-failure component left out,
+core/grid/failure.py), its row beside, and the component's cost is printed as the ratio
+of the two CPU medians.
 
 The baseline, in the same run: Nav2's AMCL (PyPI's ``amcl``, the bench extra:
 amcl_baseline.py says what it binds) on the same map, given exactly the scans
@@ -111,12 +115,13 @@ def scan_beams(ranges: np.ndarray, max_beams: int) -> tuple[np.ndarray, np.ndarr
 
 def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
         belief_floor: float, profile: bool, global_start: bool = False,
-        scan_fit: bool = True) -> dict:
+        scan_fit: bool = True, **overrides) -> dict:
     """The localizer on the log's first ``scans`` scans, from the first corrected pose
-    (or, ``global_start``, from no pose: uniform over the free cells)."""
+    (or, ``global_start``, from no pose: uniform over the free cells); ``overrides``: of
+    grid_localizer's parameters."""
     log = carmen.read_log(log_path)
     localization, settings = localizer(log, resolution, heading_bins, belief_floor,
-                                       global_start, scan_fit)
+                                       global_start, scan_fit, **overrides)
     model = localization.model
     odometry = iter(log.odometry)
     pending = next(odometry, None)
@@ -241,6 +246,11 @@ def main() -> None:
                         help="the localizer's belief_floor (default: 0 and its default)")
     parser.add_argument("--profile", action="store_true", help="cProfile of the updates")
     parser.add_argument("--no-amcl", action="store_true", help="leave the AMCL baseline out")
+    parser.add_argument("--without-odometry-failure", action="store_true",
+                        help="each floor also with odometry_failure_probability 0, and the "
+                             "component's cost as the ratio of the CPU medians")
+    parser.add_argument("--odometry-failure-probability", type=float,
+                        help=argparse.SUPPRESS)   # a child's run of it
     parser.add_argument("--one", help=argparse.SUPPRESS)   # a child's run, as JSON
     parser.add_argument("--stamps", help=argparse.SUPPRESS)   # the AMCL child's scans
     parser.add_argument("--global-start", action="store_true",
@@ -257,14 +267,29 @@ def main() -> None:
     if not args.no_amcl and not with_amcl:
         print("real_buildings: no AMCL baseline: pip install amcl==0.1.2 (the bench extra)",
               file=sys.stderr)
-    rows = []
+    rows, costs = [], []
     for name in logs:
-        results = [(f"grid, floor {floor:g}", grid_child(args, name, floor)) for floor in floors]
+        results = []
+        for floor in floors:
+            results.append((f"grid, floor {floor:g}", grid_child(args, name, floor)))
+            if args.without_odometry_failure:
+                results.append((f"grid, floor {floor:g}, odometry failure left out",
+                                grid_child(args, name, floor, odometry_failure=0.0)))
+                costs.append(_component_cost(name, floor, results[-2][1], results[-1][1]))
         if with_amcl:
             results.append(("AMCL", amcl_child(args, name, results[0][1]["stamps_ns"])))
         amcl = results[-1][1] if with_amcl else None
         rows += [_row(name, label, result, amcl) for label, result in results]
         print(table(HEADER, rows), flush=True)
+    for line in costs:
+        print(line)
+
+
+def _component_cost(name: str, floor: float, with_it: dict, without: dict) -> str:
+    ratio = np.median(with_it["cpu_ms"]) / np.median(without["cpu_ms"])
+    return (f"{Path(name).stem}, floor {floor:g}: the odometry-failure component costs "
+            f"{100 * (ratio - 1):+.1f} % CPU per update (median {np.median(with_it['cpu_ms']):.1f}"
+            f" ms with it, {np.median(without['cpu_ms']):.1f} ms without)")
 
 
 def run_one(args: argparse.Namespace) -> dict:
@@ -273,8 +298,10 @@ def run_one(args: argparse.Namespace) -> dict:
     if floor == "amcl":
         stamps = json.loads(Path(args.stamps).read_text())
         return run_amcl(resolve(log), stamps, args.global_start)
+    overrides = {} if args.odometry_failure_probability is None else \
+        {"odometry_failure_probability": args.odometry_failure_probability}
     return run(resolve(log), args.scans, args.resolution, args.heading_bins, float(floor),
-               args.profile, args.global_start, not args.no_scan_fit)
+               args.profile, args.global_start, not args.no_scan_fit, **overrides)
 
 
 HEADER = ["log", "filter", "cells", "states", "free states", "updates",
@@ -282,12 +309,15 @@ HEADER = ["log", "filter", "cells", "states", "free states", "updates",
           "x AMCL (CPU)", "peak RSS MB", "within 0.2 m, 5 deg", "median error"]
 
 
-def grid_child(args: argparse.Namespace, name: str, floor: float) -> dict:
+def grid_child(args: argparse.Namespace, name: str, floor: float,
+               odometry_failure: float | None = None) -> dict:
     command = [sys.executable, __file__, "--one", f"{name},{floor!r}", "--scans",
                str(args.scans), "--resolution", str(args.resolution), "--heading-bins",
                str(args.heading_bins)] + (["--profile"] if args.profile else []) \
         + (["--global-start"] if getattr(args, "global_start", False) else []) \
-        + (["--no-scan-fit"] if getattr(args, "no_scan_fit", False) else [])
+        + (["--no-scan-fit"] if getattr(args, "no_scan_fit", False) else []) \
+        + ([] if odometry_failure is None
+           else ["--odometry-failure-probability", repr(odometry_failure)])
     done = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 

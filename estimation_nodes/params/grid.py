@@ -103,6 +103,7 @@ class GridLocalizerSettings:
     #: Seconds a scan waits for the odometry of its time.
     odom_wait: float
     kidnap_probability: float
+    odometry_failure_probability: float
     belief_floor: float
     max_beams: int
     independent_beams: int
@@ -123,7 +124,8 @@ class GridLocalizerSettings:
         """A new belief on ``model`` with this update rule, uniform over the free cells."""
         return GridLocalization(model, self.noise, self.update_min_d, self.update_min_a,
                                 self.max_odom_jump, self.kidnap_probability,
-                                self.independent_beams, self.belief_floor)
+                                self.independent_beams, self.belief_floor,
+                                self.odometry_failure_probability)
 
 
 def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSettings:
@@ -140,6 +142,7 @@ def build_grid_localizer_settings(values: Mapping[str, Any]) -> GridLocalizerSet
         values["max_states"], occupancy, model, update_min_d=values["update_min_d"],
         update_min_a=values["update_min_a"], max_odom_jump=values["max_odom_jump"],
         odom_wait=values["odom_wait"], kidnap_probability=values["kidnap_probability"],
+        odometry_failure_probability=values["odometry_failure_probability"],
         max_beams=values["max_beams"],
         belief_floor=values["belief_floor"],
         independent_beams=values["laser_independent_beams"],

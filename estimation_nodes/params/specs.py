@@ -321,6 +321,14 @@ GRID_LOCALIZER_SPECS = _LOCALIZER_MODEL_SPECS + GRID_TF_SPECS + (
               "cells before each correction, so a kidnapped robot is found again by its scans "
               "alone (0: the exact filter; ~/global_localization recovers).", read_only=True,
               min_value=0.0, max_value=0.5),
+    ParamSpec("odometry_failure_probability", 0.25, "Probability per update that the "
+              "odometry failed since the last one (wheels slipping, an encoder running "
+              "backwards) and the robot is anywhere within 8 m of the predicted pose, nearer "
+              "the likelier: a mixture component whose posterior lowers "
+              "localization_quality and widens the covariance when a place around explains "
+              "the scan better than the tracked belief; the pose is the tracked belief's. "
+              "0: left out (needs belief_floor > 0 and kidnap_probability > 0, whose lattice "
+              "it is scored on).", read_only=True, min_value=0.0, max_value=0.9),
     ParamSpec("belief_floor", 1e-9, "After each correction the states of less probability "
               "than this are dropped (at most this x the states per update, reported in "
               "/diagnostics) and the filter runs over the box of those left, grown by what "

@@ -12,6 +12,7 @@ from estimation_nodes.core.grid import failure
 from estimation_nodes.core.grid.laser import scan_log_likelihood
 from estimation_nodes.core.grid.localization import GridLocalization
 from estimation_nodes.core.grid.motion import odometry_delta
+from estimation_nodes.core.validation import InvalidInputError
 from estimation_nodes.core.sim import planar
 from estimation_nodes.params.grid import build_grid_localizer_settings, default_odometry_noise
 from estimation_nodes.params.map_files import read_map_file
@@ -107,12 +108,12 @@ def corridor_scan(pose, rng=None):
     return ranges[valid], angles[valid]
 
 
-def kidnapped_run(carried: float, steps: int = 20, at: int = 12) -> list[dict]:
+def kidnapped_run(carried: float, steps: int = 20, at: int = 12, **values) -> list[dict]:
     """The robot drives along the corridor with grid_localizer's defaults, 0.3 m a scan
     (every scan an update), seeded noisy scans; at step ``at`` it is carried ``carried``
     m on, the odometry saying nothing. Each update's error, quality, doubt and squared
     Mahalanobis distance under the published covariance."""
-    settings = corridor_settings()
+    settings = corridor_settings(**values)
     localization: GridLocalization = settings.localization(settings.model)
     rng = np.random.default_rng(38)
     truth, odometry = (2.0, 1.6, 0.0), (0.0, 0.0, 0.0)
@@ -129,6 +130,7 @@ def kidnapped_run(carried: float, steps: int = 20, at: int = 12) -> list[dict]:
         error = np.array([estimate.pose[0] - truth[0], estimate.pose[1] - truth[1],
                           math.remainder(estimate.pose[2] - truth[2], 2 * math.pi)])
         updates.append({"step": step, "error": math.hypot(*error[:2]),
+                        "pose": estimate.pose, "astray": localization.astray.mass,
                         "quality": estimate.quality, "doubt": localization.doubt,
                         "d2": float(error @ np.linalg.solve(estimate.covariance, error))})
     return updates
@@ -167,9 +169,13 @@ def test_the_odometry_failing_is_a_mixture_component_scored_on_the_lattice_aroun
     rng = np.random.default_rng(5)
     weights = rng.random((headings.size, rows.size))
     centre, tracked = (3.0, 1.6, 0.5), 0.7
-    found = failure.astray_in(model, weights, rows, cols, tracked, centre)
     xs, ys = model.cell_centres()
     x, y = xs[cols], ys[rows]
+    reach = failure.reach_of(x, y, centre)
+    # every state listed, the weights given at a scale: the component's mass is the same
+    k, n = np.divmod(np.arange(weights.size), rows.size)
+    found = failure.astray_in(headings, k, n, weights.reshape(-1) / 4.0, tracked, reach,
+                              4.0)
     distance = np.hypot(x - centre[0], y - centre[1])
     places = np.where(distance <= failure.ASTRAY_RADIUS_M,
                       np.maximum(distance, failure.ASTRAY_NEAR_M) ** -failure.ASTRAY_FALL, 0)
@@ -203,3 +209,72 @@ def test_the_odometry_failure_fades_and_moves_with_the_robot():
     moment = after.about((5.0, 5.0, 0.0))
     assert moment[0, 0] == pytest.approx(after.p[1] * 16.0)
     assert moment[1, 1] == pytest.approx(after.p[1] * 2.5 ** 2)
+
+
+def test_the_odometry_failure_is_scored_where_it_can_matter_and_its_mass_kept(monkeypatch):
+    """The lattice states within the component's reach are scored to the end only while
+    their bound could add ASTRAY_UNSCORED to its mass (failure.astray_bounds): the same
+    run with every one of them scored gives the same poses, and the component's mass and
+    the quality to within that, with states left unscored."""
+    bounded = kidnapped_run(4.4)
+    finite = []
+    real_bounds = failure.astray_bounds
+
+    def every_state_scored(reach, size, log_tracked):
+        bounds = real_bounds(reach, size, log_tracked)
+        finite.append(int(np.count_nonzero(np.isfinite(bounds))))
+        return np.where(np.isfinite(bounds), -math.inf, bounds)
+
+    monkeypatch.setattr(failure, "astray_bounds", every_state_scored)
+    full = kidnapped_run(4.4)
+    assert sum(finite) > 0                   # states of the reach had a bound to skip by
+    assert max(u["astray"] for u in full) > 0.01     # and the component mattered
+    for ours, exact in zip(bounded, full):
+        # (the states left unscored count at their bounds in what the lattice leaves out,
+        # as the kidnap share's do: the belief's renormalization moves in the last bits)
+        np.testing.assert_allclose(ours["pose"], exact["pose"], rtol=0, atol=1e-9)
+        assert ours["astray"] == pytest.approx(exact["astray"], abs=failure.ASTRAY_UNSCORED)
+        assert ours["quality"] == pytest.approx(exact["quality"],
+                                                abs=2 * failure.ASTRAY_UNSCORED)
+
+
+def test_odometry_failure_probability_weighs_the_component_and_0_leaves_it_out():
+    """The parameter is the component's prior: more of it, more of its posterior where a
+    place around fits the scan; 0, none, and the poses are the tracked belief's all the
+    same."""
+    usual = kidnapped_run(4.4)
+    more = kidnapped_run(4.4, odometry_failure_probability=0.5)
+    without = kidnapped_run(4.4, odometry_failure_probability=0.0)
+    assert all(u["astray"] == 0.0 for u in without)
+    behind = 12          # the scan after the kidnapping: a place around fits it better
+    assert 0.0 < usual[behind]["astray"] < more[behind]["astray"]
+    for a, b in zip(usual, without):
+        np.testing.assert_allclose(a["pose"], b["pose"], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("probability", [-0.1, 1.0, float("nan")])
+def test_an_odometry_failure_probability_outside_0_to_1_is_refused(probability):
+    settings = corridor_settings()
+    with pytest.raises(InvalidInputError, match="odometry_failure_probability"):
+        GridLocalization(settings.model, settings.noise, 0.25, 0.2, 1.0, 1e-6, None, 1e-9,
+                         probability)
+
+
+def test_the_states_left_unscored_can_add_at_most_astray_unscored_to_the_component():
+    """At their bounds, every state within reach (each cell's headings sharing 1 of the
+    prior) would add the bounds' allowance in all: ASTRAY_UNSCORED of the tracked
+    evidence, so the mass is short by less than that; beyond the reach no bound
+    (+inf: the component never needs those states)."""
+    xs, ys = np.meshgrid(np.arange(0.0, 20.0, 0.2), np.arange(0.0, 6.0, 0.2))
+    x, y = xs.ravel(), ys.ravel()
+    reach = failure.reach_of(x, y, (10.0, 3.0, 0.0), probability=0.3)
+    log_tracked = -42.0
+    bounds = failure.astray_bounds(reach, x.size, log_tracked)
+    outside = np.setdiff1d(np.arange(x.size), reach.cells)
+    assert outside.size > 0 and np.all(bounds[outside] == math.inf)
+    added = 0.3 * float(np.sum(reach.prior[reach.cells] * np.exp(bounds[reach.cells])))
+    assert added == pytest.approx(failure.ASTRAY_UNSCORED * 0.7 * math.exp(log_tracked),
+                                  rel=1e-9, abs=0.0)
+    # nothing known of the rest of the mixture: every state within reach is scored
+    unknown = failure.astray_bounds(reach, x.size, -math.inf)
+    assert np.all(unknown[reach.cells] == -math.inf)

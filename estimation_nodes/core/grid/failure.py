@@ -43,7 +43,8 @@ Its posterior is that of any mixture component: the prior share times the scan's
 likelihood averaged under that prior, against the tracked belief's evidence: near
 nothing where the tracked belief explains the scan as well as the places around it, most
 of the mass where a place near it explains it many nats better. The states of the disc
-are scored anyway (the kidnap share's lattice, grid/window.py); they are not kept in the
+are scored anyway (the kidnap share's lattice, grid/window.py; each to the end only while
+its bound could add to the component's mass: ``astray_bounds``); they are not kept in the
 belief (a disc of metres in the windows would cost the building): the belief goes on as
 the posterior given that the odometry held, and what is published is the mixture's, the
 component's mass and second moment taken in (``Astray.about``), faded by RECOVERY at
@@ -230,19 +231,78 @@ class Astray:
         return float(self.p[(np.hypot(dx, dy) <= radius) & (np.abs(turn) <= angle)].sum())
 
 
-def within_reach(model: GridModel, rows: np.ndarray, cols: np.ndarray,
-                 centre: Pose) -> np.ndarray:
-    """Which of the cells (rows[n], cols[n]) are within ASTRAY_RADIUS_M of ``centre``."""
-    xs, ys = model.cell_centres()
-    return np.hypot(xs[cols] - centre[0], ys[rows] - centre[1]) <= ASTRAY_RADIUS_M
+@dataclass(frozen=True)
+class Reach:
+    """The component's prior over the listed lattice cells, centres (x[n], y[n]), around
+    the predicted pose ``centre``: ``prior[n]`` (``_astray_places``; 0 beyond
+    ASTRAY_RADIUS_M), ``cells`` the n within it. Made once per update, for the bounds
+    and the component."""
+
+    centre: Pose
+    cells: np.ndarray
+    prior: FloatArray
+    x: FloatArray
+    y: FloatArray
+    #: The component's prior probability at the update (ASTRAY_PROBABILITY by default).
+    probability: float = ASTRAY_PROBABILITY
 
 
-def astray_in(model: GridModel, weights: FloatArray, rows: np.ndarray, cols: np.ndarray,
-              tracked: float, centre: Pose) -> Astray:
-    """The odometry-failure component after a correction: ``weights``, the scan's
-    likelihood (relative to a peak) at the kidnap lattice's states (k, n): heading bin
-    KIDNAP_STEP k (every other one) at the cell (rows[n], cols[n]); ``tracked`` the rest
-    of the mixture's evidence on the same scale, and ``centre`` the predicted pose.
+def reach_of(x: FloatArray, y: FloatArray, centre: Pose,
+             probability: float = ASTRAY_PROBABILITY) -> Reach:
+    """The reach around ``centre`` of the listed cells whose centres are (x[n], y[n])."""
+    dx, dy = x - centre[0], y - centre[1]
+    squared = dx * dx
+    squared += dy * dy
+    cells = np.flatnonzero(squared <= ASTRAY_RADIUS_M ** 2)
+    prior = np.zeros(x.size)
+    if cells.size:
+        prior[cells] = _astray_places(np.sqrt(squared[cells]))
+    return Reach(centre, cells, prior, x, y, probability)
+
+
+#: The component's mass may be understated by at most this (absolute): a lattice state
+#: within its reach is scored to the end only while the bound on its log likelihood (its
+#: beams so far, every beam left a perfect hit) could give it more (``astray_bounds``).
+ASTRAY_UNSCORED = 1e-3
+
+
+def astray_bounds(reach: Reach, size: int, log_tracked: float) -> FloatArray:
+    """Per listed lattice cell (``size`` of them): the log likelihood under which none of
+    its states can matter to the component (-inf where every one must be scored; +inf
+    beyond its reach), given ``log_tracked``, the log of a lower bound on the rest of
+    the mixture's evidence (the windows' weights, before the lattice adds to them).
+
+    A state of heading k at cell n adds P x bearings[k] x places[n] x exp(log
+    likelihood) to the component's evidence (``astray_in``; P its prior probability,
+    places[n] the cell's share of it); the headings' shares sum to 1, so with every state
+    of cell n below the bound b[n] below, the cell's states add less than its allowance,
+    ASTRAY_UNSCORED x (1 - P) x exp(log_tracked) x (1 / M + places[n]) / 2 (M: the cells
+    within reach). The allowances of the M cells sum to ASTRAY_UNSCORED of the mixture's
+    evidence at most: the component's mass, the share of it, is short of the exact one by
+    less than ASTRAY_UNSCORED. (Half the allowance spread evenly, half as the prior: each
+    cell's bound is within log 2 of the larger of the two ways', the far cells' of the
+    even one, the near cells' of the prior's.)"""
+    bounds = np.full(size, math.inf)
+    if reach.cells.size == 0:
+        return bounds
+    if not math.isfinite(log_tracked):
+        bounds[reach.cells] = -math.inf
+        return bounds
+    places = reach.prior[reach.cells]
+    allowed = math.log(ASTRAY_UNSCORED * (1.0 - reach.probability)
+                       / (2.0 * reach.probability))
+    bounds[reach.cells] = log_tracked + allowed + np.log1p(1.0 / (reach.cells.size * places))
+    return bounds
+
+
+def astray_in(headings: FloatArray, k: np.ndarray, n: np.ndarray, values: FloatArray,
+              tracked: float, reach: Reach, scale: float = 1.0) -> Astray:
+    """The odometry-failure component after a correction, from the scan's likelihood at
+    the kidnap lattice's states listed: state i, of heading ``headings[k[i]]`` (the
+    lattice's, every KIDNAP_STEP-th bin) at the listed cell n[i], has the likelihood
+    values[i] x ``scale`` relative to a peak (a state not listed: 0, as one the bound
+    left unscored); ``tracked`` the rest of the mixture's evidence on the same scale,
+    and ``reach`` the cells around the predicted pose.
 
     The component's prior over the lattice states within ASTRAY_RADIUS_M (``_astray_prior``):
     a density over the disc as distance ** -ASTRAY_FALL from ASTRAY_NEAR_M on (an error
@@ -251,27 +311,21 @@ def astray_in(model: GridModel, weights: FloatArray, rows: np.ndarray, cols: np.
     better 4 to 7 m off), its heading within ASTRAY_TURN_RAD of the predicted one with
     ASTRAY_SAME_HEADING of the probability (wheels that slip or run backwards keep the
     heading; a robot carried off does not)."""
-    xs, ys = model.cell_centres()
-    inside = np.flatnonzero(within_reach(model, rows, cols, centre))
-    if inside.size == 0:
+    if reach.cells.size == 0:
         return Astray.none()
-    step = -(-model.heading_bins // weights.shape[0])
-    headings = model.headings()[::step]
-    x, y = xs[cols[inside]], ys[rows[inside]]
-    bearings, near = _astray_prior(np.hypot(x - centre[0], y - centre[1]),
-                                   headings - centre[2])
-    scores = weights[:, inside]
-    total = float(bearings @ (scores @ near))
+    bearings = _astray_bearings(headings - reach.centre[2])
+    posterior = values * bearings[k] * reach.prior[n]
+    total = float(posterior.sum()) * scale
     if not total > 0.0:
         return Astray.none()
-    share = ASTRAY_PROBABILITY * total
-    mass = share / (share + (1.0 - ASTRAY_PROBABILITY) * tracked)
+    share = reach.probability * total
+    mass = share / (share + (1.0 - reach.probability) * tracked)
     if mass < ASTRAY_NEGLIGIBLE:
         return Astray.none()
-    posterior = scores * bearings[:, None] * near[None, :]
-    k, n = np.nonzero(posterior >= ASTRAY_KEPT * float(posterior.max()))
-    p = posterior[k, n]
-    return Astray(x[n], y[n], headings[k], p * (mass / p.sum()))
+    kept = np.flatnonzero(posterior >= ASTRAY_KEPT * float(posterior.max()))
+    p = posterior[kept]
+    cells = n[kept]
+    return Astray(reach.x[cells], reach.y[cells], headings[k[kept]], p * (mass / p.sum()))
 
 
 def _astray_prior(distance: FloatArray,
@@ -280,10 +334,16 @@ def _astray_prior(distance: FloatArray,
     within its reach (``distance``: each cell's from the predicted pose; ``turns``: each
     heading's offset from the predicted one), as the product of a distribution over the
     headings and one over the cells."""
+    return _astray_bearings(turns), _astray_places(distance)
+
+
+def _astray_places(distance: FloatArray) -> FloatArray:
     places = np.maximum(distance, ASTRAY_NEAR_M) ** -ASTRAY_FALL
-    places /= places.sum()
+    return places / places.sum()
+
+
+def _astray_bearings(turns: FloatArray) -> FloatArray:
     same = np.abs(np.remainder(turns + math.pi, 2 * math.pi) - math.pi) <= ASTRAY_TURN_RAD
     bearings = np.where(same, ASTRAY_SAME_HEADING / max(int(same.sum()), 1),
                         (1.0 - ASTRAY_SAME_HEADING) / max(int((~same).sum()), 1))
-    bearings /= bearings.sum()
-    return bearings, places
+    return bearings / bearings.sum()

@@ -132,7 +132,8 @@ class GridLocalization:
     def __init__(self, model: GridModel, noise: OdometryNoise, update_min_d: float,
                  update_min_a: float, max_odom_jump: float,
                  kidnap_probability: float = 0.0,
-                 independent_beams: int | None = None, belief_floor: float = 0.0) -> None:
+                 independent_beams: int | None = None, belief_floor: float = 0.0,
+                 odometry_failure_probability: float = failure.ASTRAY_PROBABILITY) -> None:
         if not isinstance(model, GridModel):
             raise InvalidInputError(f"model: expected a GridModel, got {type(model).__name__}")
         if not isinstance(noise, OdometryNoise):
@@ -145,6 +146,11 @@ class GridLocalization:
         if kidnap_probability > 1.0:
             raise InvalidInputError(
                 f"kidnap_probability: expected a probability in [0, 1], got {kidnap_probability}")
+        odometry_failure_probability = check_non_negative("odometry_failure_probability",
+                                                          odometry_failure_probability)
+        if odometry_failure_probability >= 1.0:
+            raise InvalidInputError(f"odometry_failure_probability: expected a probability "
+                                    f"below 1, got {odometry_failure_probability}")
         if independent_beams is not None:
             scan_weight(independent_beams, 1)   # raises on a count below 1
         belief_floor = check_non_negative("belief_floor", belief_floor)
@@ -158,6 +164,7 @@ class GridLocalization:
         compiled_kernels(int(np.prod(model.shape)))
         self._min_d, self._min_a, self._max_jump = update_min_d, update_min_a, max_odom_jump
         self._kidnap = kidnap_probability
+        self._astray_probability = odometry_failure_probability
         self._floor = belief_floor
         self._free_states = int(model.free.sum()) * model.heading_bins
         self.belief: FloatArray = uniform_over_free(model)
@@ -327,8 +334,8 @@ class GridLocalization:
         delta = None if self._reference is None else odometry_delta(self._reference, pose)
         weight = 1.0 if self._independent_beams is None else \
             scan_weight(self._independent_beams, ranges.size)
-        predicted = None if delta is None or self._mode is None else \
-            failure.moved(self._mode, delta)
+        predicted = None if delta is None or self._mode is None \
+            or self._astray_probability == 0.0 else failure.moved(self._mode, delta)
         astray = failure.Astray.none()
         if self._floor > 0.0:
             correction = self._windowed_step(ranges, angles, delta, weight, predicted)
@@ -406,7 +413,8 @@ class GridLocalization:
             priors = [_normalized(spread, total) for spread, _ in spreads]
         return window.correct_boxes(priors, boxes, self.model, ranges, angles, weight,
                                     self._kidnap, self._floor, phase=self.updates,
-                                    predicted=predicted)
+                                    predicted=predicted,
+                                    astray_probability=self._astray_probability)
 
     @property
     def window_states(self) -> int:

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy import ndimage
@@ -226,7 +227,8 @@ def lattice_cells(model: GridModel, phase: int) -> np.ndarray:
 def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
                   ranges: FloatArray, angles: FloatArray, weight: float, share: float,
                   floor: float, compiled: bool = True, phase: int = 0,
-                  predicted: failure.Pose | None = None) -> Correction:
+                  predicted: failure.Pose | None = None,
+                  astray_probability: float = failure.ASTRAY_PROBABILITY) -> Correction:
     """The correction of a belief held in disjoint ``boxes`` (``priors``: each box's part,
     zero elsewhere). With ``share`` > 0 the prior is (1 - share) x that belief plus
     ``share`` spread evenly over the free states of a coarse lattice's part ``phase``
@@ -245,7 +247,8 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     the floor, left out (``Correction.left_out``, the whole renormalized over the rest).
 
     With ``predicted`` (the predicted pose) the lattice's states around it also give the
-    posterior of the odometry failing (``failure.astray_in``: ``Correction.astray``).
+    posterior of the odometry failing, its prior ``astray_probability``
+    (``failure.astray_in``: ``Correction.astray``).
     """
     reads = _scan_reads(model, ranges, angles)
     held = [_held_headings(prior) for prior in priors]
@@ -261,7 +264,7 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     parts = _weighted_parts(lls, held_priors, priors, held, peak, 1.0 - share)
     total = sum(float(part.sum()) for part in parts)
     lattice = _lattice_weights(model, reads, boxes, phase, weight, share, floor, peak, total,
-                               compiled, predicted)
+                               compiled, predicted, astray_probability)
     if lattice is not None and lattice.peak > peak:
         # A lattice state beats the windows' best: every weight relative to it.
         scale = math.exp(peak - lattice.peak) if math.isfinite(peak) else 0.0
@@ -275,9 +278,8 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     if lattice is not None:
         lattice.relative_to(peak)
         total += float(lattice.weights.sum())
-        if predicted is not None and total > 0.0:
-            astray = failure.astray_in(model, lattice.weights / lattice.per_state,
-                                      lattice.rows, lattice.cols, total, predicted)
+        if lattice.reach is not None and total > 0.0:
+            astray = lattice.astray(model, total)
     if not total > 0.0:
         raise ZeroEvidenceError("every state with probability rules the scan out")
     log_evidence = peak + math.log(total)
@@ -345,12 +347,26 @@ class LatticeWeights:
     unscored_peak: float
     per_state: float
     peak: float
+    #: The cells within the odometry-failure component's reach, where it is asked for.
+    reach: failure.Reach | None = None
     unscored: float = 0.0
+    #: The flat indices of the states scored to the end (``relative_to`` lists them).
+    scored_states: np.ndarray | None = None
+
+    def astray(self, model: GridModel, tracked: float) -> failure.Astray:
+        """The odometry-failure component, once ``relative_to`` ran (``tracked``: the rest
+        of the mixture's evidence): from the states scored to the end, the only ones
+        with a weight."""
+        assert self.reach is not None and self.scored_states is not None
+        k, n = np.divmod(self.scored_states, self.rows.size)
+        headings = model.headings()[::KIDNAP_STEP]
+        return failure.astray_in(headings, k, n, self.weights.reshape(-1)[self.scored_states],
+                                 tracked, self.reach, 1.0 / self.per_state)
 
     def relative_to(self, peak: float) -> None:
         """Weights relative to ``peak``: the scored states' from their log likelihoods, the
         others' 0 and their sum bounded by their count x their largest bound."""
-        scored = np.flatnonzero(self.scored)
+        scored = self.scored_states = np.flatnonzero(self.scored)
         flat = self.weights.reshape(-1)
         values = flat[scored]
         np.subtract(values, peak, out=values)
@@ -363,34 +379,49 @@ class LatticeWeights:
                 self.unscored_peak - peak)
 
 
-#: The lattice parts' cells of the maps in use: (free, phase) -> their rows and columns.
-_lattice_lists: dict[tuple[int, int], tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
+class LatticeList(NamedTuple):
+    """The cells of a lattice part: rows and columns of the grid, and their centres (m)."""
+
+    rows: np.ndarray
+    cols: np.ndarray
+    x: FloatArray
+    y: FloatArray
 
 
-def _lattice_list(model: GridModel, phase: int) -> tuple[np.ndarray, np.ndarray]:
-    """The rows and columns (of the grid) of ``lattice_cells(model, phase)``: made once
-    per map and part, not at every update."""
+#: The lattice parts' cells of the maps in use: (free, phase) -> (free, their list).
+_lattice_lists: dict[tuple[int, int], tuple[np.ndarray, LatticeList]] = {}
+
+
+def _lattice_list(model: GridModel, phase: int) -> LatticeList:
+    """The cells of ``lattice_cells(model, phase)``: made once per map and part, not at
+    every update."""
     key = (id(model.free), phase % KIDNAP_PHASES)
     cached = _lattice_lists.get(key)
     if cached is None or cached[0] is not model.free:
         if len(_lattice_lists) >= 4 * KIDNAP_PHASES:
             _lattice_lists.clear()
         rows, cols = (KIDNAP_STEP * index for index in np.nonzero(lattice_cells(model, phase)))
-        rows.flags.writeable = cols.flags.writeable = False     # shared by the updates
-        cached = _lattice_lists[key] = (model.free, rows, cols)
-    return cached[1], cached[2]
+        xs, ys = model.cell_centres()
+        listed = LatticeList(rows, cols, xs[cols], ys[rows])
+        for array in listed:
+            array.flags.writeable = False     # shared by the updates
+        cached = _lattice_lists[key] = (model.free, listed)
+    return cached[1]
 
 
 def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase: int,
                      weight: float, share: float, floor: float, peak: float,
                      total: float, compiled: bool = True,
-                     predicted: failure.Pose | None = None) -> LatticeWeights | None:
+                     predicted: failure.Pose | None = None,
+                     astray_probability: float = failure.ASTRAY_PROBABILITY
+                     ) -> LatticeWeights | None:
     """The lattice part ``phase``'s weighted log likelihoods (None without a share or a
     free lattice cell). ``peak`` and ``total``: the windows' largest weighted log
     likelihood and their weights' sum relative to it, which bound the posterior of a
     lattice state from above: the lattice only adds to the sum."""
     step = KIDNAP_STEP
-    rows, cols = _lattice_list(model, phase)
+    listed = _lattice_list(model, phase)
+    rows, cols = listed.rows, listed.cols
     per_state = share / (rows.size * -(-model.heading_bins // step)) if rows.size else 0.0
     if not (share > 0.0 and rows.size > 0):
         return None
@@ -402,10 +433,14 @@ def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase
         # weight x bound < peak + log(floor x share x total / per_state): the posterior
         # (per_state exp(weight x ll - peak) / total) is below floor x UNSCORED_SHARE.
         below[~inside] = (peak + math.log(floor * UNSCORED_SHARE * total / per_state)) / weight
-    if predicted is not None:
-        # The odometry-failure component weighs these states far above the kidnap share:
-        # scored to the end within its reach.
-        below[failure.within_reach(model, rows, cols, predicted)] = -math.inf
+    reach = None if predicted is None else \
+        failure.reach_of(listed.x, listed.y, predicted, astray_probability)
+    if reach is not None:
+        # The odometry-failure component weighs the states within its reach far above the
+        # kidnap share: scored to the end while they could matter to either.
+        log_tracked = peak + math.log(total) if total > 0.0 else -math.inf
+        np.minimum(below, failure.astray_bounds(reach, rows.size, log_tracked) / weight,
+                   out=below)
     ll, scored = _scan_log_likelihood_cells(model, reads, step, rows, cols, below,
                                             compiled)
     if weight != 1.0:
@@ -414,7 +449,7 @@ def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase
     unscored_peak = float(np.max(ll, where=~scored, initial=-math.inf))
     lattice_peak = float(np.max(ll, where=scored, initial=-math.inf))
     return LatticeWeights(rows, cols, ll, scored, unscored_count, unscored_peak, per_state,
-                          lattice_peak)
+                          lattice_peak, reach)
 
 
 def _held_headings(prior: FloatArray) -> np.ndarray | None:
