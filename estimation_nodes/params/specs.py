@@ -323,8 +323,8 @@ GRID_LOCALIZER_SPECS = _LOCALIZER_MODEL_SPECS + GRID_TF_SPECS + (
               min_value=0.0, max_value=0.5),
     ParamSpec("odometry_failure_probability", 0.25, "Probability per update that the "
               "odometry failed since the last one (wheels slipping, an encoder running "
-              "backwards) and the robot is anywhere within 8 m of the predicted pose, nearer "
-              "the likelier: a mixture component whose posterior lowers "
+              "backwards) and the robot is anywhere within 8 m of the predicted pose or of the "
+              "last update's, nearer the likelier: a mixture component whose posterior lowers "
               "localization_quality and widens the covariance when a place around explains "
               "the scan better than the tracked belief; the pose is the tracked belief's. "
               "0: left out (needs belief_floor > 0 and kidnap_probability > 0, whose lattice "

@@ -159,38 +159,47 @@ def test_a_place_found_again_after_a_kidnapping_is_doubted_then_confirmed():
 
 def test_the_odometry_failing_is_a_mixture_component_scored_on_the_lattice_around():
     """astray_in against the sums written out: the component's prior spread over the
-    lattice states within ASTRAY_RADIUS_M of the predicted pose (as distance to the
-    -ASTRAY_FALL, most of it on the predicted heading), its posterior against the rest
-    of the mixture's evidence, its states where the scan fits."""
+    lattice states within ASTRAY_RADIUS_M of the predicted pose and of the last one, half
+    around each (as distance to the -ASTRAY_FALL, most of it on the predicted heading),
+    its posterior against the rest of the mixture's evidence, its states where the scan
+    fits."""
     model = corridor_settings().model
     step = 2
     rows, cols = (step * index for index in np.nonzero(model.free[::step, ::step]))
     headings = model.headings()[::step]
     rng = np.random.default_rng(5)
     weights = rng.random((headings.size, rows.size))
-    centre, tracked = (3.0, 1.6, 0.5), 0.7
+    last, predicted, tracked = (1.0, 1.6, 0.4), (3.0, 1.6, 0.5), 0.7
     xs, ys = model.cell_centres()
     x, y = xs[cols], ys[rows]
-    reach = failure.reach_of(x, y, centre)
+    reach = failure.reach_of(x, y, failure.Increment(last, predicted, 0.3))
     # every state listed, the weights given at a scale: the component's mass is the same
     k, n = np.divmod(np.arange(weights.size), rows.size)
     found = failure.astray_in(headings, k, n, weights.reshape(-1) / 4.0, tracked, reach,
                               4.0)
-    distance = np.hypot(x - centre[0], y - centre[1])
-    places = np.where(distance <= failure.ASTRAY_RADIUS_M,
-                      np.maximum(distance, failure.ASTRAY_NEAR_M) ** -failure.ASTRAY_FALL, 0)
-    same = np.array([abs(math.remainder(h - centre[2], 2 * math.pi)) <= failure.ASTRAY_TURN_RAD
-                     for h in headings])
+
+    def places_around(centre):
+        distance = np.hypot(x - centre[0], y - centre[1])
+        density = np.where(distance <= failure.ASTRAY_RADIUS_M,
+                           np.maximum(distance, failure.ASTRAY_NEAR_M) ** -failure.ASTRAY_FALL,
+                           0)
+        return density / density.sum()
+
+    places = 0.5 * places_around(predicted) + 0.5 * places_around(last)
+    same = np.array([abs(math.remainder(h - predicted[2], 2 * math.pi))
+                     <= failure.ASTRAY_TURN_RAD for h in headings])
     bearings = np.where(same, failure.ASTRAY_SAME_HEADING / same.sum(),
                         (1 - failure.ASTRAY_SAME_HEADING) / (~same).sum())
-    prior = bearings[:, None] * (places / places.sum())[None]
+    prior = bearings[:, None] * places[None]
     assert prior.sum() == pytest.approx(1.0)
-    share = failure.ASTRAY_PROBABILITY * float((weights * prior).sum())
-    expected = share / (share + (1 - failure.ASTRAY_PROBABILITY) * tracked)
+    share = 0.3 * float((weights * prior).sum())
+    expected = share / (share + 0.7 * tracked)
     assert found.mass == pytest.approx(expected, rel=1e-9)
-    assert np.all(np.hypot(found.x - centre[0], found.y - centre[1])
-                  <= failure.ASTRAY_RADIUS_M + 1e-9)
-    # its states are the posterior's: their mean x as the disc's posterior mean x (but the
+    assert np.all((np.hypot(found.x - predicted[0], found.y - predicted[1])
+                   <= failure.ASTRAY_RADIUS_M + 1e-9)
+                  | (np.hypot(found.x - last[0], found.y - last[1])
+                     <= failure.ASTRAY_RADIUS_M + 1e-9))
+    # its states are the posterior's: their mean x as the discs' posterior mean x (but the
     # states below ASTRAY_KEPT of the largest, left out)
     posterior = weights * prior
     mean_x = float((posterior.sum(axis=0) * x).sum() / posterior.sum())
@@ -265,9 +274,9 @@ def test_the_states_left_unscored_can_add_at_most_astray_unscored_to_the_compone
     prior) would add the bounds' allowance in all: ASTRAY_UNSCORED of the tracked
     evidence, so the mass is short by less than that; beyond the reach no bound
     (+inf: the component never needs those states)."""
-    xs, ys = np.meshgrid(np.arange(0.0, 20.0, 0.2), np.arange(0.0, 6.0, 0.2))
+    xs, ys = np.meshgrid(np.arange(0.0, 30.0, 0.2), np.arange(0.0, 6.0, 0.2))
     x, y = xs.ravel(), ys.ravel()
-    reach = failure.reach_of(x, y, (10.0, 3.0, 0.0), probability=0.3)
+    reach = failure.reach_of(x, y, failure.Increment((9.0, 3.0, 0.0), (10.0, 3.0, 0.0), 0.3))
     log_tracked = -42.0
     bounds = failure.astray_bounds(reach, x.size, log_tracked)
     outside = np.setdiff1d(np.arange(x.size), reach.cells)

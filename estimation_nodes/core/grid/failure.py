@@ -38,7 +38,9 @@ cannot leave, where the scans are explained by whatever fits there least badly (
 corridor's repeating doors: issue 38's backwards odometry, its error 1.5 to 2.7 m with a
 quality up to 0.92). The model holds a third component for it, ``Astray``: with
 ASTRAY_PROBABILITY at each update the odometry failed and the robot is within
-ASTRAY_RADIUS_M of the predicted pose, nearer places the likelier (``_astray_prior``).
+ASTRAY_RADIUS_M of where the odometry said it went or of where it was at the last update,
+nearer places the likelier (``_astray_places``): the increment that failed may be off by
+a slip or mean nothing at all (wheels running backwards, an encoder frozen).
 Its posterior is that of any mixture component: the prior share times the scan's
 likelihood averaged under that prior, against the tracked belief's evidence: near
 nothing where the tracked belief explains the scan as well as the places around it, most
@@ -72,7 +74,8 @@ RECOVERY = 0.5
 #: was not carried there by the motion.
 REACH_SIGMAS, REACH_CELLS = 3.0, 2.0
 #: The prior probability, at each update, that the odometry failed since the last one
-#: and the robot is within ASTRAY_RADIUS_M (m) of the predicted pose. Measured on the
+#: and the robot is within ASTRAY_RADIUS_M (m) of the predicted pose or of the last
+#: update's (``Increment``). Measured on the
 #: fault bench (bench/grid_faults.py): 0.1 left an ACES corridor's backwards odometry
 #: published with quality 0.87 at 1.5 m off; 0.3 would say lost on the unfaulted ACES
 #: log where its corridors repeat.
@@ -232,32 +235,45 @@ class Astray:
 
 
 @dataclass(frozen=True)
-class Reach:
-    """The component's prior over the listed lattice cells, centres (x[n], y[n]), around
-    the predicted pose ``centre``: ``prior[n]`` (``_astray_places``; 0 beyond
-    ASTRAY_RADIUS_M), ``cells`` the n within it. Made once per update, for the bounds
-    and the component."""
+class Increment:
+    """The odometry's increment since the last update, which may have failed: the most
+    likely pose at the last update, where the increment moved it (the prediction), and
+    the prior probability that it failed."""
 
-    centre: Pose
+    last: Pose
+    predicted: Pose
+    probability: float = ASTRAY_PROBABILITY
+
+
+@dataclass(frozen=True)
+class Reach:
+    """The component's prior over the listed lattice cells, centres (x[n], y[n]):
+    ``prior[n]`` (``_astray_places``, half around the increment's predicted pose, half
+    around its last one; 0 beyond ASTRAY_RADIUS_M of both), ``cells`` the n with some.
+    Made once per update, for the bounds and the component."""
+
+    increment: Increment
     cells: np.ndarray
     prior: FloatArray
     x: FloatArray
     y: FloatArray
-    #: The component's prior probability at the update (ASTRAY_PROBABILITY by default).
-    probability: float = ASTRAY_PROBABILITY
+
+    @property
+    def probability(self) -> float:
+        return self.increment.probability
 
 
-def reach_of(x: FloatArray, y: FloatArray, centre: Pose,
-             probability: float = ASTRAY_PROBABILITY) -> Reach:
-    """The reach around ``centre`` of the listed cells whose centres are (x[n], y[n])."""
-    dx, dy = x - centre[0], y - centre[1]
-    squared = dx * dx
-    squared += dy * dy
-    cells = np.flatnonzero(squared <= ASTRAY_RADIUS_M ** 2)
+def reach_of(x: FloatArray, y: FloatArray, increment: Increment) -> Reach:
+    """The reach of ``increment`` among the listed cells whose centres are (x[n], y[n])."""
     prior = np.zeros(x.size)
-    if cells.size:
-        prior[cells] = _astray_places(np.sqrt(squared[cells]))
-    return Reach(centre, cells, prior, x, y, probability)
+    for centre in (increment.predicted, increment.last):
+        dx, dy = x - centre[0], y - centre[1]
+        squared = dx * dx
+        squared += dy * dy
+        cells = np.flatnonzero(squared <= ASTRAY_RADIUS_M ** 2)
+        if cells.size:
+            prior[cells] += 0.5 * _astray_places(np.sqrt(squared[cells]))
+    return Reach(increment, np.flatnonzero(prior), prior, x, y)
 
 
 #: The component's mass may be understated by at most this (absolute): a lattice state
@@ -302,10 +318,11 @@ def astray_in(headings: FloatArray, k: np.ndarray, n: np.ndarray, values: FloatA
     lattice's, every KIDNAP_STEP-th bin) at the listed cell n[i], has the likelihood
     values[i] x ``scale`` relative to a peak (a state not listed: 0, as one the bound
     left unscored); ``tracked`` the rest of the mixture's evidence on the same scale,
-    and ``reach`` the cells around the predicted pose.
+    and ``reach`` the cells around the increment.
 
-    The component's prior over the lattice states within ASTRAY_RADIUS_M (``_astray_prior``):
-    a density over the disc as distance ** -ASTRAY_FALL from ASTRAY_NEAR_M on (an error
+    The component's prior over the lattice states within ASTRAY_RADIUS_M of the predicted
+    pose or the last one (``_astray_places``, ``_astray_bearings``), half around each: a
+    density over each disc as distance ** -ASTRAY_FALL from ASTRAY_NEAR_M on (an error
     of a metre far likelier than one of several: the scans of a long corridor repeat
     every few metres, and an unfaulted log's tracked belief then meets places that fit
     better 4 to 7 m off), its heading within ASTRAY_TURN_RAD of the predicted one with
@@ -313,7 +330,7 @@ def astray_in(headings: FloatArray, k: np.ndarray, n: np.ndarray, values: FloatA
     heading; a robot carried off does not)."""
     if reach.cells.size == 0:
         return Astray.none()
-    bearings = _astray_bearings(headings - reach.centre[2])
+    bearings = _astray_bearings(headings - reach.increment.predicted[2])
     posterior = values * bearings[k] * reach.prior[n]
     total = float(posterior.sum()) * scale
     if not total > 0.0:
@@ -326,15 +343,6 @@ def astray_in(headings: FloatArray, k: np.ndarray, n: np.ndarray, values: FloatA
     p = posterior[kept]
     cells = n[kept]
     return Astray(reach.x[cells], reach.y[cells], headings[k[kept]], p * (mass / p.sum()))
-
-
-def _astray_prior(distance: FloatArray,
-                  turns: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The odometry-failure component's prior over the lattice states (heading k, cell n)
-    within its reach (``distance``: each cell's from the predicted pose; ``turns``: each
-    heading's offset from the predicted one), as the product of a distribution over the
-    headings and one over the cells."""
-    return _astray_bearings(turns), _astray_places(distance)
 
 
 def _astray_places(distance: FloatArray) -> FloatArray:

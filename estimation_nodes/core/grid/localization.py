@@ -32,8 +32,8 @@ likely state jumped beyond the prediction's reach, halved by each update that do
 renew it, plus what belief_floor dropped (``lost_probability``): the quality is that
 much lower, the covariance that much the robot's anywhere on the free cells. With
 belief_floor and a kidnap share it also carries the posterior of the odometry having
-failed (``failure.Astray``: the robot anywhere within metres of the predicted pose),
-scored on the kidnap lattice's states around the predicted pose: the quality that much
+failed (``failure.Astray``: the robot anywhere within metres of the predicted pose or
+of the last update's), scored on the kidnap lattice's states around them: the quality that much
 lower, the covariance that component's second moment added.
 
 Each method checks what it is given (a pose of three finite numbers, a scan of
@@ -334,11 +334,12 @@ class GridLocalization:
         delta = None if self._reference is None else odometry_delta(self._reference, pose)
         weight = 1.0 if self._independent_beams is None else \
             scan_weight(self._independent_beams, ranges.size)
-        predicted = None if delta is None or self._mode is None \
-            or self._astray_probability == 0.0 else failure.moved(self._mode, delta)
+        increment = None if delta is None or self._mode is None \
+            or self._astray_probability == 0.0 else failure.Increment(
+                self._mode, failure.moved(self._mode, delta), self._astray_probability)
         astray = failure.Astray.none()
         if self._floor > 0.0:
-            correction = self._windowed_step(ranges, angles, delta, weight, predicted)
+            correction = self._windowed_step(ranges, angles, delta, weight, increment)
             self._hold_windows(correction)
             log_evidence, kidnapped = correction.log_evidence, correction.kidnapped
             astray = correction.astray or astray
@@ -396,7 +397,8 @@ class GridLocalization:
 
     def _windowed_step(self, ranges: FloatArray, angles: FloatArray,
                        delta: tuple[float, float, float] | None,
-                       weight: float, predicted: Pose | None = None) -> window.Correction:
+                       weight: float,
+                       increment: failure.Increment | None = None) -> window.Correction:
         """The steps over the windows: each grown by what the motion reaches (those that
         then overlap joined), predicted on its own and normalized together, then
         corrected together (window.correct_boxes)."""
@@ -413,8 +415,7 @@ class GridLocalization:
             priors = [_normalized(spread, total) for spread, _ in spreads]
         return window.correct_boxes(priors, boxes, self.model, ranges, angles, weight,
                                     self._kidnap, self._floor, phase=self.updates,
-                                    predicted=predicted,
-                                    astray_probability=self._astray_probability)
+                                    increment=increment)
 
     @property
     def window_states(self) -> int:
@@ -473,8 +474,8 @@ class GridLocalization:
         if self._mode is None:
             return state, f"no scan since {self._started}"
         doubts = {self.doubt_cause.value: self.doubt,
-                  "the scan fits a place around the predicted pose better than the tracked "
-                  "one: the odometry may have failed": self.astray.mass,
+                  "the scan fits a place near the predicted or the last pose better than "
+                  "the tracked one: the odometry may have failed": self.astray.mass,
                   "belief_floor dropped part of the belief": self.last_dropped}
         reason, share = max(doubts.items(), key=lambda pair: pair[1])
         if share < 0.5 * (1.0 - estimate.quality):

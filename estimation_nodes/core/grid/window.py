@@ -227,8 +227,7 @@ def lattice_cells(model: GridModel, phase: int) -> np.ndarray:
 def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
                   ranges: FloatArray, angles: FloatArray, weight: float, share: float,
                   floor: float, compiled: bool = True, phase: int = 0,
-                  predicted: failure.Pose | None = None,
-                  astray_probability: float = failure.ASTRAY_PROBABILITY) -> Correction:
+                  increment: failure.Increment | None = None) -> Correction:
     """The correction of a belief held in disjoint ``boxes`` (``priors``: each box's part,
     zero elsewhere). With ``share`` > 0 the prior is (1 - share) x that belief plus
     ``share`` spread evenly over the free states of a coarse lattice's part ``phase``
@@ -246,8 +245,8 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     probability ``floor`` or more are kept (``Correction.kept``) and the rest, all below
     the floor, left out (``Correction.left_out``, the whole renormalized over the rest).
 
-    With ``predicted`` (the predicted pose) the lattice's states around it also give the
-    posterior of the odometry failing, its prior ``astray_probability``
+    With the odometry's ``increment`` (the last update's pose and the predicted one) the
+    lattice's states around it also give the posterior of the odometry failing
     (``failure.astray_in``: ``Correction.astray``).
     """
     reads = _scan_reads(model, ranges, angles)
@@ -264,7 +263,7 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     parts = _weighted_parts(lls, held_priors, priors, held, peak, 1.0 - share)
     total = sum(float(part.sum()) for part in parts)
     lattice = _lattice_weights(model, reads, boxes, phase, weight, share, floor, peak, total,
-                               compiled, predicted, astray_probability)
+                               compiled, increment)
     if lattice is not None and lattice.peak > peak:
         # A lattice state beats the windows' best: every weight relative to it.
         scale = math.exp(peak - lattice.peak) if math.isfinite(peak) else 0.0
@@ -412,9 +411,7 @@ def _lattice_list(model: GridModel, phase: int) -> LatticeList:
 def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase: int,
                      weight: float, share: float, floor: float, peak: float,
                      total: float, compiled: bool = True,
-                     predicted: failure.Pose | None = None,
-                     astray_probability: float = failure.ASTRAY_PROBABILITY
-                     ) -> LatticeWeights | None:
+                     increment: failure.Increment | None = None) -> LatticeWeights | None:
     """The lattice part ``phase``'s weighted log likelihoods (None without a share or a
     free lattice cell). ``peak`` and ``total``: the windows' largest weighted log
     likelihood and their weights' sum relative to it, which bound the posterior of a
@@ -433,8 +430,7 @@ def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase
         # weight x bound < peak + log(floor x share x total / per_state): the posterior
         # (per_state exp(weight x ll - peak) / total) is below floor x UNSCORED_SHARE.
         below[~inside] = (peak + math.log(floor * UNSCORED_SHARE * total / per_state)) / weight
-    reach = None if predicted is None else \
-        failure.reach_of(listed.x, listed.y, predicted, astray_probability)
+    reach = None if increment is None else failure.reach_of(listed.x, listed.y, increment)
     if reach is not None:
         # The odometry-failure component weighs the states within its reach far above the
         # kidnap share: scored to the end while they could matter to either.
