@@ -65,11 +65,16 @@ def first_moment() -> float:
 
 
 def takes_sigint(pid: int) -> bool:
-    """Whether the process catches or blocks SIGINT (/proc's SigCgt, SigBlk): before the
-    interpreter installs its handler, a SIGINT kills any Python program outright, which no
-    code of ours can change; "loading" begins once it can be taken."""
+    """Whether the process is the Python interpreter and catches or blocks SIGINT (/proc's
+    exe; SigCgt, SigBlk): before the interpreter installs its handler, a SIGINT kills any
+    Python program outright, which no code of ours can change; "loading" begins once it
+    can be taken. (The installed scripts are shell wrappers that exec the interpreter,
+    and dash catches SIGINT itself: a SIGINT between its exec and the interpreter's
+    handler ended a play with no word and exit -2.)"""
     bit = 1 << (signal.SIGINT - 1)
     with contextlib.suppress(OSError):
+        if not Path(os.readlink(f"/proc/{pid}/exe")).name.startswith("python"):
+            return False
         fields = dict(line.split(":\t", 1) for line in
                       Path(f"/proc/{pid}/status").read_text().splitlines() if ":\t" in line)
         return bool((int(fields["SigCgt"], 16) | int(fields["SigBlk"], 16)) & bit)
