@@ -41,16 +41,20 @@ class AmclBaseline:
     """AMCL on an occupancy map (core/grid/occupancy.OccupancyMap), started from a pose
     and its covariance."""
 
-    def __init__(self, occupancy, prior: Sequence[float], covariance: np.ndarray) -> None:
+    def __init__(self, occupancy, prior: Sequence[float], covariance: np.ndarray,
+                 particles: int | None = None) -> None:
+        """``particles``: that many always (min_particles = max_particles), instead of
+        Nav2's 500 to 2000."""
         if amcl is None:
             raise RuntimeError("AMCL baseline: pip install amcl==0.1.2 (.[bench])")
         d = NAV2_DEFAULTS
+        fewest, most = (d["min_particles"], d["max_particles"]) if particles is None \
+            else (particles, particles)
         motion = amcl.MotionParameters(d["alpha"], d["alpha"], d["alpha"], d["alpha"], 0.0)
         laser = amcl.LaserParameters(d["z_hit"], d["z_short"], d["z_max"], d["z_rand"],
                                      d["sigma_hit"], d["lambda_short"], d["chi_outlier"],
                                      d["max_beams"])
-        self._filter = amcl.AMCL(d["min_particles"], d["max_particles"], 0.0, 0.0, motion,
-                                 laser, "differential")
+        self._filter = amcl.AMCL(fewest, most, 0.0, 0.0, motion, laser, "differential")
         # Row 0 at the origin, as nav_msgs/OccupancyGrid and the bindings both hold it.
         self._filter.set_map(amcl.create_occupancy_grid_from_list(
             occupancy.cells.astype(int).tolist(), occupancy.resolution, *occupancy.origin))

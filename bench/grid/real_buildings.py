@@ -2,7 +2,7 @@
 
     python bench/grid/real_buildings.py [--log intel|aces|PATH ...] [--scans N]
         [--resolution 0.1] [--heading-bins 72] [--belief-floor F ...] [--profile]
-        [--no-amcl] [--without-odometry-failure]
+        [--no-amcl] [--without-odometry-failure] [--amcl-particles N ...]
 
 For each CARMEN log (../shared/data/carmen, see its README) a map is made from
 the log's SLAM-corrected poses at 0.05 m (mapping with known poses,
@@ -32,7 +32,12 @@ The baseline, in the same run: Nav2's AMCL (PyPI's ``amcl``, the bench extra:
 amcl_baseline.py says what it binds) on the same map, given exactly the scans
 the first configuration updated with and the raw odometry at each, with its
 time per update and accuracy; every row's "x AMCL" is its median time over
-AMCL's. Left out, with a note, where ``amcl`` is not installed.
+AMCL's. Left out, with a note, where ``amcl`` is not installed. With
+``--amcl-particles N ...`` AMCL runs again with N particles each (min = max), its rows
+beside, and the bench prints, per log, the run of AMCL whose share within 0.2 m and 5
+degrees comes nearest the first grid configuration's (of runs as near, the cheapest),
+with that configuration's CPU median over that AMCL's: how our cost compares where AMCL
+is as accurate as it gets.
 """
 
 from __future__ import annotations
@@ -156,7 +161,8 @@ def run(log_path: Path, scans: int, resolution: float, heading_bins: int,
             "qualities": qualities, **_scores(times, errors, headings, cpu)}
 
 
-def run_amcl(log_path: Path, stamps_ns: list[int], global_start: bool = False) -> dict:
+def run_amcl(log_path: Path, stamps_ns: list[int], global_start: bool = False,
+             particles: int | None = None) -> dict:
     """AMCL on the scans taken at ``stamps_ns``, each with the raw odometry pose at or
     before its time, from the same prior as the localizer; ``global_start``: from the
     map's centre with a covariance as wide as the map (the bindings cannot spread the
@@ -171,7 +177,7 @@ def run_amcl(log_path: Path, stamps_ns: list[int], global_start: bool = False) -
     else:
         prior = log.scans[0].pose
         covariance = np.diag([PRIOR_SIGMA_M ** 2] * 2 + [PRIOR_SIGMA_RAD ** 2])
-    baseline = amcl_baseline.AmclBaseline(occupancy, prior, covariance)
+    baseline = amcl_baseline.AmclBaseline(occupancy, prior, covariance, particles)
     taken = set(stamps_ns)
     odometry, index = log.odometry, 0
     times, cpu, errors, headings = [], [], [], []
@@ -251,6 +257,10 @@ def main() -> None:
                              "component's cost as the ratio of the CPU medians")
     parser.add_argument("--odometry-failure-probability", type=float,
                         help=argparse.SUPPRESS)   # a child's run of it
+    parser.add_argument("--amcl-particles", type=int, nargs="+", default=[],
+                        help="AMCL also with these particle counts, and our cost against "
+                             "the one nearest our accuracy")
+    parser.add_argument("--particles", type=int, help=argparse.SUPPRESS)   # an AMCL child's
     parser.add_argument("--one", help=argparse.SUPPRESS)   # a child's run, as JSON
     parser.add_argument("--stamps", help=argparse.SUPPRESS)   # the AMCL child's scans
     parser.add_argument("--global-start", action="store_true",
@@ -276,13 +286,33 @@ def main() -> None:
                 results.append((f"grid, floor {floor:g}, odometry failure left out",
                                 grid_child(args, name, floor, odometry_failure=0.0)))
                 costs.append(_component_cost(name, floor, results[-2][1], results[-1][1]))
+        amcl = None
         if with_amcl:
-            results.append(("AMCL", amcl_child(args, name, results[0][1]["stamps_ns"])))
-        amcl = results[-1][1] if with_amcl else None
+            stamps = results[0][1]["stamps_ns"]
+            amcl = amcl_child(args, name, stamps)
+            swept = [(count, amcl_child(args, name, stamps, count))
+                     for count in args.amcl_particles]
+            results += [("AMCL", amcl)] + [(f"AMCL, {count} particles", result)
+                                           for count, result in swept]
+            if swept:
+                costs.append(_nearest_amcl(name, results[0], [(None, amcl)] + swept))
         rows += [_row(name, label, result, amcl) for label, result in results]
         print(table(HEADER, rows), flush=True)
     for line in costs:
         print(line)
+
+
+def _nearest_amcl(name: str, ours: tuple[str, dict], runs: list[tuple[int | None, dict]]) -> str:
+    """The AMCL run whose accuracy comes nearest ours (of those as near, the cheapest: the
+    comparison least kind to us), and our CPU median over its."""
+    label, result = ours
+    count, nearest = min(runs, key=lambda run: (round(abs(run[1]["near"] - result["near"]), 6),
+                                                np.median(run[1]["cpu_ms"])))
+    ratio = np.median(result["cpu_ms"]) / np.median(nearest["cpu_ms"])
+    particles = "Nav2's 500 to 2000" if count is None else str(count)
+    return (f"{Path(name).stem}: AMCL nearest our accuracy ({100 * result['near']:.1f} % "
+            f"within 0.2 m, 5 deg): {particles} particles, {100 * nearest['near']:.1f} %; "
+            f"{label} / that AMCL, CPU median: {ratio:.2f}")
 
 
 def _component_cost(name: str, floor: float, with_it: dict, without: dict) -> str:
@@ -297,7 +327,7 @@ def run_one(args: argparse.Namespace) -> dict:
     log, floor = args.one.split(",")
     if floor == "amcl":
         stamps = json.loads(Path(args.stamps).read_text())
-        return run_amcl(resolve(log), stamps, args.global_start)
+        return run_amcl(resolve(log), stamps, args.global_start, args.particles)
     overrides = {} if args.odometry_failure_probability is None else \
         {"odometry_failure_probability": args.odometry_failure_probability}
     return run(resolve(log), args.scans, args.resolution, args.heading_bins, float(floor),
@@ -322,12 +352,14 @@ def grid_child(args: argparse.Namespace, name: str, floor: float,
     return json.loads(done.stdout.strip().splitlines()[-1])
 
 
-def amcl_child(args: argparse.Namespace, name: str, stamps_ns: list[int]) -> dict:
+def amcl_child(args: argparse.Namespace, name: str, stamps_ns: list[int],
+               particles: int | None = None) -> dict:
     with tempfile.NamedTemporaryFile("w", suffix=".json") as stamps:
         json.dump(stamps_ns, stamps)
         stamps.flush()
         command = [sys.executable, __file__, "--one", f"{name},amcl", "--stamps", stamps.name] \
-            + (["--global-start"] if getattr(args, "global_start", False) else [])
+            + (["--global-start"] if getattr(args, "global_start", False) else []) \
+            + ([] if particles is None else ["--particles", str(particles)])
         done = subprocess.run(command, stdout=subprocess.PIPE, text=True, check=True)
     return json.loads(done.stdout.strip().splitlines()[-1])
 
