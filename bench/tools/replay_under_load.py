@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -87,6 +88,9 @@ def main() -> None:
     print(f"replay_under_load: ROS_DOMAIN_ID={env['ROS_DOMAIN_ID']}, {args.runs} runs of "
           f"each of {', '.join(args.scenarios)}, {args.load} busy loops", flush=True)
     counts: dict[str, Counter] = {scenario: Counter() for scenario in args.scenarios}
+    # A kill (SIGTERM) ends the runs as a Ctrl-C does: the busy loops and the run under
+    # way with them, not left running.
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     load = start_load(args.load)
     print(f"replay_under_load: busy loops pids {[p.pid for p in load]}", flush=True)
     interrupted = False
