@@ -40,8 +40,9 @@ within 15 s, with the median times. ``--details`` lists every confidently wrong 
 with its quality, squared distance, the probability the floor dropped (``last_dropped``)
 and its log evidence against the median of the ten updates before it.
 
-With ``--node`` each faulted log (but the kidnap, whose trials branch off a run) goes
-through the running executables instead, as real_log_node.py runs a log: written as a
+With ``--node`` each faulted log goes through the running executables instead, as
+real_log_node.py runs a log (the kidnap's trials each a run of its own: from the
+corrected pose LEAD_SCANS scans before scan k, then carried as above): written as a
 CARMEN log (the truth as the laser's pose, the faulted odometry as the odometry),
 imported, mapped from the unfaulted log, played at ``--scan-rate`` scans a second (2:
 on a loaded 2-core machine 5 left the node no time for every scan; the bench says when
@@ -90,6 +91,8 @@ CLUTTER_SHARE, CLUTTER_M = 0.3, (0.2, 2.0)
 #: Kidnap trials: how far the robot is carried, how far apart in time its two scans are
 #: at least, how long (s of the log) each trial runs after the kidnap, and the goals.
 KIDNAP_M, KIDNAP_APART_S, TRIAL_S = (4.5, 5.5), 60.0, 30.0
+#: --node: a trial's run starts this many scans before its kidnap, from the corrected pose.
+LEAD_SCANS = 10
 LOST_WITHIN_S, FOUND_WITHIN_S = 5.0, 15.0
 #: fault -> (duration s, what it does): odometry (each increment changed) or scans.
 FAULTS = {
@@ -312,28 +315,58 @@ class Runner:
         return updates
 
     def kidnap(self, localization, trial: Trial, t_k: float, odometry_k: Pose) -> None:
-        """Branch off at scan k: the log from scan m on, re-timed to follow t_k, its
-        odometry going on from ``odometry_k``; the updates of TRIAL_S after the kidnap."""
+        """Branch off at scan k: the updates of TRIAL_S after the kidnap
+        (``carried``)."""
         branch = copy.deepcopy(localization)
+        for moved in self.carried(trial, t_k, odometry_k):
+            update = self.step(branch, moved)
+            if update is not None:
+                trial.updates.append(update)
+
+    def carried(self, trial: Trial, t_k: float, odometry_k: Pose) -> list:
+        """What follows scan k (at ``t_k``, the odometry then at ``odometry_k``) once the
+        robot is carried: the log from scan m on, re-timed to follow t_k, its odometry
+        going on from ``odometry_k``, for TRIAL_S (and ``trial.start_t`` set)."""
         scans = self.log.scans
         t_before = scans[trial.m - 1].t
         raw = [s for s in self.log.odometry if s.t <= t_before]
         offset = compose(odometry_k, inverse(raw[-1].pose if raw else ORIGIN))
         shift = t_k - t_before
         trial.start_t = scans[trial.m].t + shift
+        events: list[Odometry | Reading] = []
         for event in self.events:
             if event.t <= t_before:
                 continue
             t = event.t + shift
             if t > trial.start_t + TRIAL_S:
                 break
-            if isinstance(event, Odometry):
-                moved: Odometry | Reading = Odometry(t, compose(offset, event.pose))
-            else:
-                moved = replace(event, t=t)
-            update = self.step(branch, moved)
-            if update is not None:
-                trial.updates.append(update)
+            events.append(Odometry(t, compose(offset, event.pose))
+                          if isinstance(event, Odometry) else replace(event, t=t))
+        return events
+
+    def lead_up(self, k: int) -> tuple[list, float, Pose]:
+        """The log's events from LEAD_SCANS scans before scan k to scan k, the time of
+        scan k and the odometry then: a trial through the node starts there, from the
+        corrected pose (the node's run is a run of its own, not a branch of one)."""
+        readings = [i for i, e in enumerate(self.events) if isinstance(e, Reading)]
+        first, last = readings[max(k - LEAD_SCANS, 0)], readings[k]
+        before = [e for e in self.events[:last] if isinstance(e, Odometry)]
+        return self.events[first:last + 1], self.events[last].t, \
+            before[-1].pose if before else ORIGIN
+
+
+def node_kidnaps(name: str, runner: Runner, trials: list[Trial], scan_rate: float) -> None:
+    """Each trial through the running node: the lead-up to scan k then the robot carried
+    (``Runner.carried``), a play of its own; its updates after the kidnap."""
+    with tempfile.TemporaryDirectory() as folder:
+        map_yaml = None
+        for index, trial in enumerate(trials):
+            events, t_k, odometry_k = runner.lead_up(trial.k)
+            events = events + runner.carried(trial, t_k, odometry_k)
+            work = Path(folder) / f"trial_{index}"
+            work.mkdir()
+            updates, map_yaml = through_node(name, events, work, scan_rate, map_yaml)
+            trial.updates = [u for u in updates if u.t >= trial.start_t]
 
 
 def write_carmen(events: list, path: Path) -> None:
@@ -354,23 +387,26 @@ def write_carmen(events: list, path: Path) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
-def through_node(name: str, events: list, work: Path, scan_rate: float) -> list[Update]:
+def through_node(name: str, events: list, work: Path, scan_rate: float,
+                 map_yaml: Path | None = None) -> tuple[list[Update], Path]:
     """``events`` through the running grid_localizer (real_log_node.py's run at
-    ``scan_rate`` scans a second, the map from the unfaulted log): its published poses,
-    each with the quality published before it and its covariance."""
+    ``scan_rate`` scans a second, the map from the unfaulted log, or ``map_yaml`` where
+    one was made): its published poses, each with the quality published before it and
+    its covariance; and the map it was given."""
     from real_log_node import play
 
     log_path = work / "faulted.log"
     write_carmen(events, log_path)
     options = argparse.Namespace(scan_rate=scan_rate, resolution=0.1, heading_bins=72,
                                  max_odom_jump=5.0, seconds=0.0, tf=False, record=None)
-    played = play(options, log_path, work, map_from=resolve(name))
+    played = play(options, log_path, work, map_from=resolve(name), map_yaml=map_yaml)
     watcher = played.watcher
     say_scans_lost(name, events, watcher.diagnostics)
     truth = {ns(e.t): e for e in events if isinstance(e, Reading)}
     return [Update(truth[stamp].t, truth[stamp].truth, pose, watcher.quality_of(stamp),
                    watcher.covariances[stamp], math.nan, math.nan)
-            for stamp, pose in sorted(watcher.poses.items()) if stamp in truth]
+            for stamp, pose in sorted(watcher.poses.items()) if stamp in truth], \
+        played.map_yaml
 
 
 def say_scans_lost(name: str, events: list, diagnostics: dict[str, str]) -> None:
@@ -417,7 +453,7 @@ def row(log_name: str, fault: str, updates: list[Update]) -> list[str]:
             f"{100 * np.mean([u.distance2 <= CHI2_99 for u in updates]):.1f} %"]
 
 
-def kidnap_row(log_name: str, trials: list[Trial]) -> list[str]:
+def kidnap_row(log_name: str, trials: list[Trial], suffix: str = "") -> list[str]:
     lost = [t.first(lambda u: u.quality < LOST) for t in trials]
     found = [t.first(lambda u: u.near) for t in trials]
     updates = [u for t in trials for u in t.updates]
@@ -427,7 +463,7 @@ def kidnap_row(log_name: str, trials: list[Trial]) -> list[str]:
         median = f", median {np.median(met):.1f} s" if met else ""
         return f"{len(met)} / {len(times)}{median}"
 
-    return [*row(log_name, f"kidnap ({len(trials)} trials)", updates),
+    return [*row(log_name, f"kidnap ({len(trials)} trials){suffix}", updates),
             within(lost, LOST_WITHIN_S), within(found, FOUND_WITHIN_S)]
 
 
@@ -480,12 +516,17 @@ def main() -> None:
         for fault in [f for f in ALL if f in args.faults]:
             if fault == "none" and "kidnap" in args.faults and not args.node:
                 continue        # the kidnap's pass is the unfaulted one
-            if fault == "kidnap" and args.node:
-                continue        # trials branch off a run: the core's only
             started = time.monotonic()
             # One stream of random numbers per log and fault, whatever else is run.
             rng = np.random.default_rng([args.seed, ALL.index(fault), len(log.scans)])
-            if fault == "kidnap":
+            if fault == "kidnap" and args.node:
+                trials = kidnap_trials(log, args.trials, rng)
+                node_kidnaps(name, runner, trials, args.scan_rate)
+                rows.append(kidnap_row(name, trials, " (node)"))
+                for trial in trials:
+                    listed += details(name, f"kidnap {trial.k} -> {trial.m} (node)",
+                                      trial.updates)
+            elif fault == "kidnap":
                 trials = kidnap_trials(log, args.trials, rng)
                 updates = runner.run(runner.events, trials)
                 rows.append(row(name, "none", updates) + ["-", "-"])
@@ -502,7 +543,7 @@ def main() -> None:
                     events = with_scan_fault(runner.events, fault, starts, rng)
                 if args.node:
                     with tempfile.TemporaryDirectory() as work:
-                        updates = through_node(name, events, Path(work), args.scan_rate)
+                        updates, _ = through_node(name, events, Path(work), args.scan_rate)
                 else:
                     updates = runner.run(events)
                 rows.append(row(name, fault + (" (node)" if args.node else ""), updates)

@@ -73,16 +73,21 @@ TF_LASER_AHEAD = 0.25
 
 
 def prepare(log_path: Path, work: Path, laser_ahead: float,
-            map_from: Path | None = None) -> tuple[Path, Path]:
+            map_from: Path | None = None, map_yaml: Path | None = None) -> tuple[Path, Path]:
     """The recording and the map, made by the package's own tools; the map from the log
-    ``map_from`` where given (a log with faults injected is mapped from its clean one)."""
+    ``map_from`` where given (a log with faults injected is mapped from its clean one),
+    or ``map_yaml`` as it is, one made before."""
     recording, stem = work / "run.mcap", work / "map"
+    if map_yaml is not None:
+        map_from = None
     for source, target in ((log_path, recording), (map_from, work / "mapped.mcap")):
         if source is not None:
             subprocess.run([executable("estimation_import"), "carmen", str(source), "-o",
                             str(target), "--range-max", str(RANGE_MAX),
                             "--laser-ahead", str(laser_ahead)], check=True,
                            stdout=subprocess.DEVNULL)
+    if map_yaml is not None:
+        return recording, map_yaml
     # The truth is base_link's: the map is made from the laser's poses, laser_ahead before.
     subprocess.run([executable("estimation_map"),
                     str(recording if map_from is None else work / "mapped.mcap"),
@@ -274,14 +279,14 @@ def run(args: argparse.Namespace, log_path: Path, work: Path) -> list[list[str]]
 
 
 def play(args: argparse.Namespace, log_path: Path, work: Path,
-         map_from: Path | None = None) -> Played:
-    """The log through the running localizer (``prepare``'s map, ``map_from``'s where
-    given), as the module's docstring says."""
+         map_from: Path | None = None, map_yaml: Path | None = None) -> Played:
+    """The log through the running localizer (``prepare``'s map: ``map_from``'s, or
+    ``map_yaml`` where given), as the module's docstring says."""
     import rclpy
 
     log = carmen.read_log(log_path)
     laser_ahead = TF_LASER_AHEAD if args.tf else 0.0
-    recording, map_yaml = prepare(log_path, work, laser_ahead, map_from)
+    recording, map_yaml = prepare(log_path, work, laser_ahead, map_from, map_yaml)
     if args.record:
         map_yaml = beside(args.record, map_yaml)
     period = float(np.median(np.diff([scan.t for scan in log.scans])))
