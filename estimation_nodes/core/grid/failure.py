@@ -279,7 +279,7 @@ def reach_of(x: FloatArray, y: FloatArray, increment: Increment) -> Reach:
 #: The component's mass may be understated by at most this (absolute): a lattice state
 #: within its reach is scored to the end only while the bound on its log likelihood (its
 #: beams so far, every beam left a perfect hit) could give it more (``astray_bounds``).
-ASTRAY_UNSCORED = 1e-3
+ASTRAY_UNSCORED = 3e-3
 
 
 def astray_bounds(reach: Reach, size: int, log_tracked: float) -> FloatArray:
