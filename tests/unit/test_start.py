@@ -107,3 +107,23 @@ def test_a_ctrl_c_swallowed_by_a_finalizer_reaches_the_program(fake_program, cap
         run_main("fake_program", 130)
     assert ended.value.code == 42
     assert "Exception ignored" not in capsys.readouterr().err
+
+
+def test_a_node_the_demo_starts_imports_the_demos_package_not_the_current_folders(
+        tmp_path, monkeypatch):
+    """A folder holding another estimation_nodes (a source checkout, a user's copy): the
+    demo's node runs the package the demo runs, not that one (``python -m`` would put the
+    current folder first on its path)."""
+    from estimation_nodes.tools.demo.graph_runtime import start_node
+
+    fake = tmp_path / "estimation_nodes" / "nodes"
+    fake.mkdir(parents=True)
+    (tmp_path / "estimation_nodes" / "__init__.py").write_text("")
+    (fake / "__init__.py").write_text("")
+    marker = tmp_path / "the_folders_package_ran"
+    (fake / "start.py").write_text(f"open({str(marker)!r}, 'w').close()\n")
+    monkeypatch.chdir(tmp_path)
+    # An unknown node: the package's start.py refuses it (exit 2); the folder's would run.
+    process = start_node("no_such_node", tmp_path / "params.yaml")
+    assert process.wait(timeout=60) == 2
+    assert not marker.exists()

@@ -62,9 +62,12 @@ def start_node(name: str, params: Path, *overrides: str,
     # Python is still starting up (before any code of ours could take it; it would print
     # "Fatal Python error") waits until nodes/start.py unblocks it.
     mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    # PYTHONSAFEPATH: ``python -m`` would put the current folder first on the child's path,
+    # so a demo started in a source checkout ran its nodes on the checkout's code and
+    # itself on the installed package's; the child imports what this process would.
+    env = {**os.environ, PARENT_PID_ENV: str(os.getpid()), "PYTHONSAFEPATH": "1"}
     try:
-        return subprocess.Popen(command, env={**os.environ, PARENT_PID_ENV: str(os.getpid())},
-                                process_group=0)
+        return subprocess.Popen(command, env=env, process_group=0)
     finally:
         signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
