@@ -42,7 +42,7 @@ from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Imu
 
 from estimation_nodes.core.fusion import steps
-from estimation_nodes.core.fusion.control import command_of
+from estimation_nodes.core.fusion.control import DroppedCommand, command_message
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
@@ -166,23 +166,13 @@ class FusionNode(Node):
 
     def _on_command(self, msg: Twist | TwistStamped) -> None:
         """The robot's velocity command (the peer's control callbacks)."""
-        if isinstance(msg, TwistStamped):
-            if msg.header.frame_id not in ("", self._config.base_link_frame):
-                self._inputs.drop(f"cmd_vel: frame {msg.header.frame_id!r} is not "
-                                  f"{self._config.base_link_frame!r}")
-                self.get_logger().warning(
-                    f"cmd_vel in {msg.header.frame_id!r}, not the robot's "
-                    f"{self._config.base_link_frame!r}: dropped", throttle_duration_sec=5.0)
-                return
-            stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-            twist = msg.twist
-        else:
-            stamp_ns, twist = self.get_clock().now().nanoseconds, msg
-        command = command_of(twist)
-        if not all(math.isfinite(v) for v in command):
-            self._inputs.drop("cmd_vel: a non-finite value")
-            self.get_logger().warning("cmd_vel: a non-finite value: dropped",
-                                      throttle_duration_sec=5.0)
+        try:
+            command, stamp_ns = command_message(
+                msg, self._config.stamped_control, self.get_clock().now().nanoseconds,
+                self._config.base_link_frame)
+        except DroppedCommand as why:
+            self._inputs.drop(f"cmd_vel: {why}")
+            self.get_logger().warning(f"cmd_vel: {why}: dropped", throttle_duration_sec=5.0)
             return
         assert self._fusion.control is not None
         self._fusion.control.set(command, stamp_ns)

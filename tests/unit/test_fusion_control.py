@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from estimation_nodes.core.fusion import state, steps
-from estimation_nodes.core.fusion.control import Control, ControlSettings, control_acceleration
+from estimation_nodes.core.fusion.control import (Control, ControlSettings, DroppedCommand,
+                                                  command_message, control_acceleration)
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.steps import Measurement
 from estimation_nodes.params.fusion import FusionConfigError, fusion_config
@@ -167,3 +168,24 @@ def test_the_offline_run_takes_recorded_commands_as_the_node_does():
     without = offline.run(config, messages[:1] + [(990_000_000, "/other", None)])
     assert with_commands.fusion.x[state.VX] > 0.5
     assert without.fusion.x[state.VX] == pytest.approx(0.0, abs=1e-12)
+
+
+def stamped(frame: str, vx: float) -> SimpleNamespace:
+    return SimpleNamespace(header=SimpleNamespace(frame_id=frame,
+                                                  stamp=SimpleNamespace(sec=3, nanosec=5)),
+                           twist=twist(vx, 0.0))
+
+
+def test_a_command_message_is_taken_at_its_arrival_or_its_stamp_in_the_robots_frame():
+    """The node and the offline run take a command alike (control.command_message): a
+    Twist at its arrival, a TwistStamped at its stamp in the robot's frame or none; one in
+    another frame or with a non-finite value is dropped, saying why."""
+    assert command_message(twist(1.0, 0.5), False, 7, "base_link") == \
+        ((1.0, 0.0, 0.0, 0.0, 0.0, 0.5), 7)
+    for frame in ("", "base_link"):
+        assert command_message(stamped(frame, 2.0), True, 7, "base_link") == \
+            ((2.0, 0.0, 0.0, 0.0, 0.0, 0.0), 3_000_000_005)
+    with pytest.raises(DroppedCommand, match="frame 'odom' is not 'base_link'"):
+        command_message(stamped("odom", 2.0), True, 7, "base_link")
+    with pytest.raises(DroppedCommand, match="non-finite"):
+        command_message(twist(float("nan"), 0.0), False, 7, "base_link")

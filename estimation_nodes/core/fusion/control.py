@@ -27,6 +27,7 @@ Where this differs from the peer (``ros2`` branch), on purpose:
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -72,6 +73,29 @@ def command_of(twist) -> tuple[float, ...]:
     control_config's order."""
     return (twist.linear.x, twist.linear.y, twist.linear.z,
             twist.angular.x, twist.angular.y, twist.angular.z)
+
+
+class DroppedCommand(ValueError):
+    """A velocity command that cannot be taken; the message says why."""
+
+
+def command_message(msg, stamped: bool, arrival_ns: int,
+                    base_frame: str) -> tuple[tuple[float, ...], int]:
+    """A velocity-command message's command and time, as the node and the offline run
+    both take it: a Twist at its ``arrival_ns``; a TwistStamped (``stamped``) at its stamp,
+    in ``base_frame`` or no frame. DroppedCommand for one in another frame or with a
+    non-finite value."""
+    if stamped:
+        if msg.header.frame_id not in ("", base_frame):
+            raise DroppedCommand(f"frame {msg.header.frame_id!r} is not {base_frame!r}")
+        stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        twist = msg.twist
+    else:
+        stamp_ns, twist = arrival_ns, msg
+    command = command_of(twist)
+    if not all(math.isfinite(v) for v in command):
+        raise DroppedCommand("a non-finite value")
+    return command, stamp_ns
 
 
 class Control:

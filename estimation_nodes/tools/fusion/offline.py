@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from estimation_nodes.core.fusion.control import command_of
+from estimation_nodes.core.fusion.control import DroppedCommand, command_message
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.sensors import SensorInputs
@@ -77,7 +77,7 @@ def run(config: FusionConfig, messages, mounts: dict[str, Mount] | None = None,
             tick(next_tick)
             next_tick += period_ns
         if fusion.control is not None and topic.lstrip("/") == CONTROL_TOPIC:
-            take_command(fusion, msg, received_ns, config.stamped_control)
+            take_command(fusion, msg, received_ns, config)
         for sensor in by_topic.get(topic.lstrip("/"), []):
             sensor_inputs.add(sensor, msg, fusion)
     if next_tick is not None:
@@ -85,14 +85,14 @@ def run(config: FusionConfig, messages, mounts: dict[str, Mount] | None = None,
     return FusionRun(fusion, sensor_inputs, outputs, covariances)
 
 
-def take_command(fusion: FusionFilter, msg, received_ns: int, stamped: bool) -> None:
-    """A recorded velocity command into the filter, as the node takes it: a Twist at its
-    arrival, a TwistStamped at its stamp (non-finite ones left out)."""
-    command = command_of(msg.twist if stamped else msg)
-    if not all(math.isfinite(v) for v in command):
+def take_command(fusion: FusionFilter, msg, received_ns: int, config: FusionConfig) -> None:
+    """A recorded velocity command into the filter, as the node takes it
+    (``control.command_message``; one the node drops is left out)."""
+    try:
+        command, stamp_ns = command_message(msg, config.stamped_control, received_ns,
+                                            config.base_link_frame)
+    except DroppedCommand:
         return
-    stamp_ns = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec if stamped \
-        else received_ns
     assert fusion.control is not None
     fusion.control.set(command, stamp_ns)
 
