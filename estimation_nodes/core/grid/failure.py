@@ -76,9 +76,9 @@ REACH_SIGMAS, REACH_CELLS = 3.0, 2.0
 #: The prior probability, at each update, that the odometry failed since the last one
 #: and the robot is within ASTRAY_RADIUS_M (m) of the predicted pose or of the last
 #: update's (``Increment``). Measured on the
-#: fault bench (bench/grid_faults.py): 0.1 left an ACES corridor's backwards odometry
-#: published with quality 0.87 at 1.5 m off; 0.3 would say lost on the unfaulted ACES
-#: log where its corridors repeat.
+#: fault bench (bench/grid_faults.py), with the prior then around the predicted pose
+#: alone: 0.1 left an ACES corridor's backwards odometry published with quality 0.87 at
+#: 1.5 m off; 0.3 would say lost on the unfaulted ACES log where its corridors repeat.
 ASTRAY_PROBABILITY = 0.25
 ASTRAY_RADIUS_M = 8.0
 #: Its prior's shape (``_astray_prior``): the distance below which it is as likely as at
