@@ -61,6 +61,8 @@ MESSAGE_TYPES = {"odom": Odometry, "pose": PoseWithCovarianceStamped,
 SENSOR_MOUNTS = "sensor_mounts"
 #: Seconds between /diagnostics messages (the peer's diagnostic_updater period).
 DIAGNOSTICS_PERIOD = 1.0
+#: The count of late measurements put in their place (smooth_lagged_data): not a problem.
+LATE_SMOOTHED = "late, put in its place"
 
 
 def parse_mounts(entries: Sequence[str]) -> dict[str, Mount]:
@@ -174,8 +176,7 @@ class FusionNode(Node):
             self._inputs.drop(f"cmd_vel: {why}")
             self.get_logger().warning(f"cmd_vel: {why}: dropped", throttle_duration_sec=5.0)
             return
-        assert self._fusion.control is not None
-        self._fusion.control.set(command, stamp_ns)
+        self._fusion.command(command, stamp_ns)
 
     def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
         """The estimate put at the pose (the peer's set_pose topic)."""
@@ -193,7 +194,8 @@ class FusionNode(Node):
         counts = measurement_counts(self._fusion, self._inputs)
         problems = [f"{key}: {count - self._reported.get(key, 0)} since the last report"
                     for key, count in counts.items()
-                    if not key.endswith(" applied") and count > self._reported.get(key, 0)]
+                    if not key.endswith((" applied", LATE_SMOOTHED))
+                    and count > self._reported.get(key, 0)]
         self._reported = counts
         values = {"initialized": self._fusion.initialized, "queued": self._fusion.queued,
                   "resets": self.resets, **counts}
@@ -272,6 +274,10 @@ def measurement_counts(fusion: FusionFilter, inputs: SensorInputs) -> dict[str, 
     for source in sorted(set(counts.applied) | set(counts.rejected)):
         values[f"{source} applied"] = counts.applied.get(source, 0)
         values[f"{source} rejected"] = counts.rejected.get(source, 0)
+    for source, count in sorted(counts.smoothed.items()):
+        values[f"{source} {LATE_SMOOTHED}"] = count
+    for source, count in sorted(counts.beyond_history.items()):
+        values[f"{source} late, older than history_length"] = count
     for reason, count in sorted(inputs.dropped.items()):
         part, _, why = reason.partition(": ")
         values[f"{part} dropped: {why}"] = count

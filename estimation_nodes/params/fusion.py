@@ -31,7 +31,8 @@ SUPPORTED = {
     "transform_timeout", "process_noise_covariance", "initial_estimate_covariance",
     "initial_state", "predict_to_current_time", "dynamic_process_noise_covariance",
     "gravitational_acceleration", "alpha", "kappa", "beta", "filter_type",
-    "print_diagnostics", "use_sim_time", *CONTROL_PARAMETERS,
+    "print_diagnostics", "use_sim_time", "smooth_lagged_data", "history_length",
+    *CONTROL_PARAMETERS,
 }
 #: Parameters that change nothing a run computes (logging, the peer's launch helpers).
 #: And every rclpy node's own (rclpy declares it; the node reads it from the overrides).
@@ -164,9 +165,11 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
     if initial_state.size != STATE_SIZE:
         raise FusionConfigError(f"initial_state: expected {STATE_SIZE} numbers")
     control, notes = _control(params, sensors, timeout)
+    history_ns, history_notes = _history(params)
     settings = FusionSettings(
         kind=kind,
         control=control,
+        history_ns=history_ns,
         process_noise=_matrix(params, "process_noise_covariance",
                               np.diag([0.05, 0.05, 0.06, 0.03, 0.03, 0.06, 0.025, 0.025,
                                        0.04, 0.01, 0.01, 0.02, 0.01, 0.01, 0.015])),
@@ -192,7 +195,29 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
         print_diagnostics=bool(params.get("print_diagnostics", False)),
         stamped_control=bool(params.get("stamped_control", False)),
         unsupported=tuple(unsupported),
-        notes=notes)
+        notes=notes + history_notes)
+
+
+def _history(params: dict[str, Any]) -> tuple[int | None, tuple[str, ...]]:
+    """How far back late measurements are put in their place (``smooth_lagged_data``,
+    ``history_length`` in s; None: not smoothed), and the lines to warn of (the peer's)."""
+    try:
+        length = float(params.get("history_length", 0.0))
+    except (TypeError, ValueError):
+        length = math.nan
+    if not math.isfinite(length):
+        raise FusionConfigError("history_length: expected a finite time in s")
+    if not bool(params.get("smooth_lagged_data", False)):
+        if length != 0.0:
+            return None, (f"Filter history interval of {length} specified, but "
+                          "smooth_lagged_data is set to false. Lagged data will not be "
+                          "smoothed.",)
+        return None, ()
+    notes: tuple[str, ...] = ()
+    if length < 0:
+        notes = (f"Negative history interval of {length} specified. Absolute value will "
+                 "be assumed.",)
+    return round(abs(length) * 1e9), notes
 
 
 def _per_velocity(params: dict[str, Any], name: str, default: tuple[float, ...]

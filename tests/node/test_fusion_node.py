@@ -263,3 +263,30 @@ def test_cmd_vel_speeds_the_estimate_up_between_measurements(fusion_node, make_n
         commands.publish(command("odom"))
         assert spin_until(executor, lambda: any(
             "cmd_vel: frame 'odom'" in reason for reason in node._inputs.dropped), 5.0)
+
+
+def test_a_late_measurement_is_put_in_its_place_and_reported_without_a_warning(
+        fusion_node, collector_factory, executor):
+    """smooth_lagged_data: odom1's reading, older than odom0's already taken, goes in its
+    place (the core's tests prove the arithmetic); /diagnostics counts it, and it is no
+    problem."""
+    node = fusion_node(print_diagnostics=True, smooth_lagged_data=True, history_length=5.0,
+                       odom1="other/odom", odom1_config=TWIST_CONFIG)
+    collector = collector_factory({"/diagnostics": (DiagnosticArray, 10)})
+    t0 = node.get_clock().now().nanoseconds - 1_000_000_000
+    on_odom0, on_odom1 = (subscription.callback
+                          for subscription in node._sensor_subscriptions)
+    on_odom0(odom(t0, 1.0, 0.0))
+    on_odom0(odom(t0 + 40_000_000, 1.0, 0.0))
+    assert spin_until(executor, lambda: node._fusion.last_time_ns == t0 + 40_000_000, 10.0)
+    on_odom1(odom(t0 + 20_000_000, 1.0, 0.0))
+
+    def reported() -> dict[str, str]:
+        statuses = [status for msg in collector.messages["/diagnostics"]
+                    for status in msg.status]
+        return {v.key: v.value for v in statuses[-1].values} if statuses else {}
+
+    assert spin_until(executor, lambda: reported().get(
+        "odom1_twist late, put in its place") == "1", 10.0)
+    assert reported()["odom1_twist applied"] == "1"
+    assert collector.messages["/diagnostics"][-1].status[0].level == DiagnosticStatus.OK

@@ -118,11 +118,11 @@ def test_a_mount_turns_the_twist_and_its_mask():
 def test_the_config_reads_the_peers_names_and_says_what_it_does_not_support():
     config = fusion_config({"frequency": 50.0, "odom0": "/odom",
                             "odom0_config": [False] * 6 + [True] * 3 + [False] * 6,
-                            "smooth_lagged_data": True, "imu0": "/imu",
+                            "publish_acceleration": True, "imu0": "/imu",
                             "imu0_config": [False] * 15})
     assert config.frequency == 50.0
     assert config.sensors["odom0"].update[6:9] == (True, True, True)
-    assert config.unsupported == ("smooth_lagged_data",)
+    assert config.unsupported == ("publish_acceleration",)
     with pytest.raises(FusionConfigError, match="process_noise_covariance: expected 225"):
         fusion_config({"process_noise_covariance": [1.0, 2.0]})
     with pytest.raises(FusionConfigError, match="frequency"):

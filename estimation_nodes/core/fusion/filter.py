@@ -11,8 +11,12 @@
 - ``set_pose(measurement, now)`` puts the estimate where the measurement says.
 - ``differentiate(now)`` is the angular acceleration the IMU's lever arm needs, the
   change of the rates between two periodic steps, as the peer computes it.
-- With ``control`` settings (``use_control``), ``control.set`` takes the velocity
-  command, and each prediction starts with its term (control.py).
+- With ``control`` settings (``use_control``), ``command`` takes the velocity command,
+  and each prediction starts with its term (control.py).
+- With ``history_ns`` (``smooth_lagged_data``), a measurement older than the filter's
+  time is put in its place: the filter's steps (measurements, the periodic step's
+  predictions, velocity commands) are events of the package's ``CausalOrder``, so a late
+  one is applied where it belongs and the later ones run again (lagged.py).
 """
 
 from __future__ import annotations
@@ -23,8 +27,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from estimation_nodes.core.causal_order import CausalOrder
 from estimation_nodes.core.fusion import steps
 from estimation_nodes.core.fusion.control import Control, ControlSettings
+from estimation_nodes.core.fusion.lagged import (MAX_EVENTS, RANK_COMMAND, RANK_MEASUREMENT,
+                                                 RANK_PREDICTION, Command, PredictTo,
+                                                 Snapshot)
 from estimation_nodes.core.fusion.state import STATE_SIZE, TWIST, VROLL
 from estimation_nodes.core.fusion.steps import Measurement, Rejected, UnscentedWeights
 from estimation_nodes.core.validation import FloatArray
@@ -49,6 +57,9 @@ class FusionSettings:
     weights: UnscentedWeights = UnscentedWeights()
     #: The control term's settings (``use_control``), None without it.
     control: ControlSettings | None = None
+    #: How far back a late measurement is put in its place (``smooth_lagged_data`` with
+    #: ``history_length``, ns); None: a late one is corrected at the filter's time.
+    history_ns: int | None = None
 
 
 @dataclass
@@ -57,6 +68,10 @@ class Counts:
 
     applied: dict[str, int] = field(default_factory=dict)
     rejected: dict[str, int] = field(default_factory=dict)
+    #: Late measurements put in their place (``smooth_lagged_data``).
+    smoothed: dict[str, int] = field(default_factory=dict)
+    #: Late measurements older than the history holds: corrected at the filter's time.
+    beyond_history: dict[str, int] = field(default_factory=dict)
 
     def add(self, table: dict[str, int], source: str) -> None:
         table[source] = table.get(source, 0) + 1
@@ -89,37 +104,49 @@ class FusionFilter:
         #: The velocity command and its term (None without ``use_control``); a reset
         #: forgets the command, as the peer's does.
         self.control = Control(self.settings.control) if self.settings.control else None
+        history_ns = self.settings.history_ns
+        self._set_pose_ns = -1 << 62
+        self._history = None if history_ns is None else CausalOrder(self, history_ns,
+                                                                    MAX_EVENTS)
 
     # --- the peer's FilterBase::processMeasurement --------------------------------------
 
     def process(self, measurement: Measurement) -> bool:
         """Predict to the measurement's time and correct; False when it was rejected."""
+        return self._process(measurement, count=True)[0]
+
+    def _process(self, measurement: Measurement, count: bool) -> tuple[bool, bool]:
+        """(taken, whether the state changed: a rejected one may still have predicted)."""
         if not self.initialized:
-            self._initialize(measurement)
-            return True
+            self._initialize(measurement, count)
+            return True, True
         delta_ns = measurement.stamp_ns - self.last_time_ns
         if delta_ns > 0:
             self.predict(delta_ns)
         try:
             self._correct(measurement)
         except Rejected:
-            self.counts.add(self.counts.rejected, measurement.source)
             accepted = False
         else:
-            self.counts.add(self.counts.applied, measurement.source)
             accepted = True
+        if count:
+            self.counts.add(self.counts.applied if accepted else self.counts.rejected,
+                            measurement.source)
         if delta_ns >= 0:
             self.last_time_ns = measurement.stamp_ns
-        return accepted
+        return accepted, accepted or delta_ns > 0
 
-    def _initialize(self, measurement: Measurement) -> None:
+    def _initialize(self, measurement: Measurement, count: bool = True) -> None:
         idx = list(measurement.indices)
-        # R with its variances floored, as a correction would take it: the peer copies the
+        # New arrays: a saved state (smooth_lagged_data) holds the old ones. R with its
+        # variances floored, as a correction would take it: the peer copies the
         # message's, so a negative variance there would make P indefinite.
+        self.x, self.p = self.x.copy(), self.p.copy()
         self.x[idx], self.p[np.ix_(idx, idx)] = steps.subset(measurement)
         self.initialized = True
         self.last_time_ns = measurement.stamp_ns
-        self.counts.add(self.counts.applied, measurement.source)
+        if count:
+            self.counts.add(self.counts.applied, measurement.source)
 
     def set_pose(self, measurement: Measurement, now_ns: int) -> None:
         """The peer's ``set_pose``: the state is the measurement's values (0 where it has
@@ -131,6 +158,9 @@ class FusionFilter:
         idx = list(measurement.indices)
         self.x[idx], self.p[np.ix_(idx, idx)] = steps.subset(measurement)
         self._queue.clear()
+        if self._history is not None:
+            self._history.clear()   # nothing goes back before the pose it was put at
+        self._set_pose_ns = now_ns
         self.last_time_ns = now_ns
         self.counts.add(self.counts.applied, measurement.source)
 
@@ -183,14 +213,72 @@ class FusionFilter:
         if self._queue:
             while self._queue and self._queue[0][0] <= now_ns:
                 _, _, measurement = heapq.heappop(self._queue)
-                self.process(measurement)
+                self._take(measurement)
                 taken += 1
         elif self.initialized and now_ns - self.last_time_ns >= self.settings.sensor_timeout_ns:
             predict_to_now = True
         if self.initialized and predict_to_now and now_ns > self.last_time_ns:
-            self.predict(now_ns - self.last_time_ns)
-            self.last_time_ns = now_ns
+            if self._history is None:
+                self._predict_to(now_ns)
+            else:
+                self._history.submit(now_ns, RANK_PREDICTION, PredictTo(now_ns))
         return taken
+
+    def _take(self, measurement: Measurement) -> None:
+        if self._history is None:
+            self.process(measurement)
+            return
+        stamp_ns = measurement.stamp_ns
+        # Late as the peer counts it: older than the filter's time.
+        late = self.initialized and stamp_ns < self.last_time_ns
+        # Nothing goes back before a set pose: an older one is taken at the pose's time.
+        before_pose = stamp_ns < self._set_pose_ns
+        submission = self._history.submit(max(stamp_ns, self._set_pose_ns), RANK_MEASUREMENT,
+                                          measurement)
+        if submission.too_late or before_pose:
+            self.counts.add(self.counts.beyond_history, measurement.source)
+        elif late:
+            self.counts.add(self.counts.smoothed, measurement.source)
+
+    def _predict_to(self, now_ns: int) -> None:
+        self.predict(now_ns - self.last_time_ns)
+        self.last_time_ns = now_ns
+
+    def command(self, command: FloatArray, stamp_ns: int) -> None:
+        """The robot's velocity command at ``stamp_ns`` (``use_control``)."""
+        if self.control is None:
+            raise ValueError("a velocity command needs the control term (use_control)")
+        if self._history is None:
+            self.control.set(command, stamp_ns)
+        else:
+            self._history.submit(stamp_ns, RANK_COMMAND, Command(np.array(command, dtype=float),
+                                                                 stamp_ns))
+
+    # --- smooth_lagged_data: the filter as CausalOrder's target (lagged.py) -------------
+
+    def snapshot(self) -> Snapshot:
+        control = self.control
+        return Snapshot(self.x, self.p, self._points, self.initialized, self.last_time_ns,
+                        None if control is None else (control.command, control.command_ns))
+
+    def restore(self, state: Snapshot) -> None:
+        self.x, self.p, self._points = state.x, state.p, state.points
+        self.initialized, self.last_time_ns = state.initialized, state.last_time_ns
+        if state.command is not None and self.control is not None:
+            self.control.command, self.control.command_ns = state.command
+
+    def apply(self, event, first_time: bool) -> bool:
+        """One event in its place; False when it left the state as it was."""
+        if isinstance(event, Measurement):
+            return self._process(event, count=first_time)[1]
+        if isinstance(event, PredictTo):
+            if not self.initialized or event.stamp_ns <= self.last_time_ns:
+                return False
+            self._predict_to(event.stamp_ns)
+            return True
+        assert self.control is not None
+        self.control.set(event.command, event.stamp_ns)
+        return True
 
     def differentiate(self, now_ns: int) -> None:
         """The angular acceleration since the last periodic step (the peer's estimate)."""

@@ -93,8 +93,7 @@ def take_command(fusion: FusionFilter, msg, received_ns: int, config: FusionConf
                                             config.base_link_frame)
     except DroppedCommand:
         return
-    assert fusion.control is not None
-    fusion.control.set(command, stamp_ns)
+    fusion.command(command, stamp_ns)
 
 
 def parse_mount(text: str) -> tuple[str, Mount]:
@@ -141,6 +140,9 @@ def main(argv: list[str] | None = None) -> int:
           f"({len(result.outputs)} periodic outputs)")
     print(f"measurements applied {result.fusion.counts.applied}, "
           f"rejected {result.fusion.counts.rejected}, dropped {result.inputs.dropped}")
+    if config.settings.history_ns is not None:
+        print(f"late, put in their place {result.fusion.counts.smoothed}, "
+              f"older than history_length {result.fusion.counts.beyond_history}")
     return 0
 
 
