@@ -45,7 +45,7 @@ from estimation_nodes.core.fusion import steps
 from estimation_nodes.core.fusion.control import DroppedCommand, command_message
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
-from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
+from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs, gyro_biases
 from estimation_nodes.core.fusion.state import quaternion_from_rpy, rotation_from_quaternion
 from estimation_nodes.core.transforms.buffer import LookupFailed, TransformBuffer
 from estimation_nodes.core.transforms.rigid import Transform
@@ -197,8 +197,10 @@ class FusionNode(Node):
                     if not key.endswith((" applied", LATE_SMOOTHED))
                     and count > self._reported.get(key, 0)]
         self._reported = counts
+        biases = {f"{name} gyro bias (rad/s)": " ".join(f"{v:.6f}" for v in bias)
+                  for name, bias in gyro_biases(self._config.sensors, self._fusion.x).items()}
         values = {"initialized": self._fusion.initialized, "queued": self._fusion.queued,
-                  "resets": self.resets, **counts}
+                  "resets": self.resets, **counts, **biases}
         self._diagnostics_publisher.publish(status_array(self, "filter", values, problems))
 
     def _on_time_jump_back(self) -> None:

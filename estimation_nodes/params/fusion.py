@@ -8,7 +8,7 @@ on yet (the node says each in one warning line), never silently ignored.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -17,7 +17,7 @@ from estimation_nodes.core.fusion.control import CONTROL_NAMES, CONTROL_SIZE, Co
 from estimation_nodes.core.fusion.filter import FusionSettings
 from estimation_nodes.core.fusion.inputs import Mount
 from estimation_nodes.core.fusion.sensors import SensorConfig, SensorInputs
-from estimation_nodes.core.fusion.state import AX, STATE_SIZE
+from estimation_nodes.core.fusion.state import AX, GYRO_BIAS_SIZE, STATE_SIZE
 from estimation_nodes.core.fusion.steps import UnscentedWeights
 
 #: The control term's parameters (core/fusion/control.py).
@@ -38,6 +38,11 @@ SUPPORTED = {
 #: And every rclpy node's own (rclpy declares it; the node reads it from the overrides).
 HARMLESS = {"clear_params", "debug", "debug_out_file", "start_type_description_service"}
 SENSOR_KINDS = ("odom", "pose", "twist", "imu")
+#: This package's own per-IMU parameters (beyond the peer): estimate the gyro's bias as 3
+#: state entries, with this initial variance ((rad/s)^2) and random walk ((rad/s)^2 / s).
+GYRO_BIAS_SUFFIXES = ("_gyro_bias", "_gyro_bias_variance", "_gyro_bias_process_noise")
+GYRO_BIAS_VARIANCE = 1e-3
+GYRO_BIAS_PROCESS_NOISE = 1e-8
 _TOPIC = {"", "_config", "_queue_size"}
 #: Per-input suffixes read and acted on, by kind: the peer's names (a pose or twist
 #: topic has one ``_rejection_threshold``, an odometry or IMU one per part).
@@ -48,7 +53,7 @@ SENSOR_SUFFIXES = {
     "twist": _TOPIC | {"_rejection_threshold"},
     "imu": _TOPIC | {"_differential", "_relative", "_remove_gravitational_acceleration",
                      "_pose_rejection_threshold", "_twist_rejection_threshold",
-                     "_linear_acceleration_rejection_threshold"},
+                     "_linear_acceleration_rejection_threshold", *GYRO_BIAS_SUFFIXES},
 }
 
 
@@ -116,6 +121,7 @@ def _threshold(params: dict[str, Any], name: str) -> float:
 
 def _sensors(params: dict[str, Any]) -> dict[str, SensorConfig]:
     sensors: dict[str, SensorConfig] = {}
+    next_bias = STATE_SIZE
     for kind in SENSOR_KINDS:
         index = 0
         while f"{kind}{index}" in params:
@@ -140,9 +146,62 @@ def _sensors(params: dict[str, Any]) -> dict[str, SensorConfig]:
                 # Both set: the peer says so in an error line and takes the differential.
                 relative=bool(params.get(f"{name}_relative", False)) and not differential,
                 differential=differential,
-                queue_size=int(params.get(f"{name}_queue_size", 10)))
+                queue_size=int(params.get(f"{name}_queue_size", 10)),
+                gyro_bias=next_bias if kind == "imu" and _flag(params, f"{name}_gyro_bias")
+                else None)
+            if sensors[name].gyro_bias is not None:
+                next_bias += GYRO_BIAS_SIZE
             index += 1
     return sensors
+
+
+def _flag(params: dict[str, Any], name: str) -> bool:
+    value = params.get(name, False)
+    if not isinstance(value, (bool, np.bool_)):
+        raise FusionConfigError(f"{name}: expected true or false, got {value!r}")
+    return bool(value)
+
+
+def _positive(params: dict[str, Any], name: str, default: float) -> float:
+    try:
+        value = float(params.get(name, default))
+    except (TypeError, ValueError):
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise FusionConfigError(f"{name}: expected a positive number, got "
+                                f"{params.get(name)!r}")
+    return value
+
+
+def _with_gyro_biases(settings: FusionSettings, params: dict[str, Any],
+                      sensors: dict[str, SensorConfig]) -> FusionSettings:
+    """The settings grown by 3 entries per IMU whose gyro bias is estimated: 0 at the
+    start, with its ``_gyro_bias_variance``, and its ``_gyro_bias_process_noise`` as a
+    random walk; nothing correlated with the 15 at the start."""
+    variances, noises = [], []
+    for sensor in sensors.values():
+        if sensor.gyro_bias is not None:
+            variances += [_positive(params, f"{sensor.name}_gyro_bias_variance",
+                                    GYRO_BIAS_VARIANCE)] * GYRO_BIAS_SIZE
+            noises += [_positive(params, f"{sensor.name}_gyro_bias_process_noise",
+                                 GYRO_BIAS_PROCESS_NOISE)] * GYRO_BIAS_SIZE
+    if not variances:
+        return settings
+
+    def grown(matrix: np.ndarray, diagonal: list[float]) -> np.ndarray:
+        size = STATE_SIZE + len(diagonal)
+        out = np.zeros((size, size))
+        out[:STATE_SIZE, :STATE_SIZE] = matrix
+        out[STATE_SIZE:, STATE_SIZE:] = np.diag(diagonal)
+        return out
+
+    weights = settings.weights
+    return replace(
+        settings, process_noise=grown(settings.process_noise, noises),
+        initial_covariance=grown(settings.initial_covariance, variances),
+        initial_state=np.concatenate([settings.initial_state, np.zeros(len(variances))]),
+        weights=UnscentedWeights(weights.alpha, weights.kappa, weights.beta,
+                                 STATE_SIZE + len(variances)))
 
 
 def _is_sensor_parameter(name: str, sensors: dict[str, SensorConfig]) -> bool:
@@ -182,6 +241,7 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
         weights=UnscentedWeights(float(params.get("alpha", 0.001)),
                                  float(params.get("kappa", 0.0)),
                                  float(params.get("beta", 2.0))))
+    settings = _with_gyro_biases(settings, params, sensors)
     return FusionConfig(
         settings=settings, sensors=sensors, frequency=frequency,
         world_frame=str(params.get("world_frame", params.get("odom_frame", "odom"))),

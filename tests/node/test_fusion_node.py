@@ -290,3 +290,14 @@ def test_a_late_measurement_is_put_in_its_place_and_reported_without_a_warning(
         "odom1_twist late, put in its place") == "1", 10.0)
     assert reported()["odom1_twist applied"] == "1"
     assert collector.messages["/diagnostics"][-1].status[0].level == DiagnosticStatus.OK
+
+
+def test_an_estimated_gyro_bias_is_reported_in_diagnostics(fusion_node, collector_factory,
+                                                           executor):
+    node = fusion_node(print_diagnostics=True, imu0="imu/data", imu0_gyro_bias=True,
+                       imu0_config=[False] * 9 + [True] * 3 + [False] * 3)
+    assert node._fusion.x.shape == (18,)
+    collector = collector_factory({"/diagnostics": (DiagnosticArray, 10)})
+    assert spin_until(executor, lambda: bool(collector.messages["/diagnostics"]), 10.0)
+    values = {v.key: v.value for v in collector.messages["/diagnostics"][-1].status[0].values}
+    assert values["imu0 gyro bias (rad/s)"] == "0.000000 0.000000 0.000000"

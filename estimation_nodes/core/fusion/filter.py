@@ -44,7 +44,11 @@ SET_POSE_VARIANCE = 1e-6
 
 @dataclass(frozen=True)
 class FusionSettings:
-    """What the filter needs of the configuration (robot_localization's meanings)."""
+    """What the filter needs of the configuration (robot_localization's meanings).
+
+    The state's size is ``initial_state``'s: 15, and 3 per estimated gyro bias;
+    ``process_noise``, ``initial_covariance`` and ``weights.size`` match it.
+    """
 
     #: "ekf" or "ukf".
     kind: str = "ekf"
@@ -83,10 +87,21 @@ class FusionFilter:
     def __init__(self, settings: FusionSettings) -> None:
         if settings.kind not in ("ekf", "ukf"):
             raise ValueError(f"filter kind must be 'ekf' or 'ukf', got {settings.kind!r}")
+        size = int(np.size(settings.initial_state))
+        if np.shape(settings.process_noise) != (size, size) or \
+                np.shape(settings.initial_covariance) != (size, size) or \
+                settings.weights.size != size:
+            raise ValueError(f"the process noise, the initial covariance and the unscented "
+                             f"weights must all be for {size} entries, as the initial state")
         self.settings = settings
         self.counts = Counts()
         self._arrivals = itertools.count()
         self.reset()
+
+    @property
+    def size(self) -> int:
+        """The state's entries: 15, and 3 per estimated gyro bias."""
+        return int(np.size(self.settings.initial_state))
 
     def reset(self) -> None:
         """Back to the initial state, uninitialized, with nothing queued."""
@@ -97,7 +112,8 @@ class FusionFilter:
         self._queue: list[tuple[int, int, Measurement]] = []
         # The UKF's sigma points for its next correction: the propagated ones right after
         # a prediction, None for "draw new ones" (the peer starts with all-zero points).
-        self._points: FloatArray | None = np.zeros((2 * STATE_SIZE + 1, STATE_SIZE))
+        size = self.size
+        self._points: FloatArray | None = np.zeros((2 * size + 1, size))
         self._last_rates = np.zeros(3)
         self._last_diff_ns: int | None = None
         self.angular_acceleration = np.zeros(3)
@@ -153,8 +169,12 @@ class FusionFilter:
         none), the covariance its covariance there (variances floored) and 1e-6 elsewhere;
         what was queued is dropped; the last measurement time is ``now_ns``. Whether the
         filter was initialized stays as it was, as in the peer."""
-        self.x = np.zeros(STATE_SIZE)
-        self.p = np.eye(STATE_SIZE) * SET_POSE_VARIANCE
+        # Gyro biases are the sensors', not the pose's: kept, with their variances.
+        x = np.zeros(self.size)
+        x[STATE_SIZE:] = self.x[STATE_SIZE:]
+        p = np.eye(self.size) * SET_POSE_VARIANCE
+        p[STATE_SIZE:, STATE_SIZE:] = self.p[STATE_SIZE:, STATE_SIZE:]
+        self.x, self.p = x, p
         idx = list(measurement.indices)
         self.x[idx], self.p[np.ix_(idx, idx)] = steps.subset(measurement)
         self._queue.clear()

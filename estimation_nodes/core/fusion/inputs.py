@@ -355,5 +355,7 @@ def force_two_d(measurement: Measurement) -> Measurement:
     covariance[:, _PLANAR_INDEX] = 0.0
     covariance[_PLANAR_INDEX, _PLANAR_INDEX] = PLANAR_VARIANCE
     indices = tuple(sorted(set(measurement.indices).union(PLANAR_ZEROS)))
+    # A zero said of a rate is of the rate itself, not of a gyro's reading of it.
+    biased = tuple(pair for pair in measurement.biased if pair[0] not in PLANAR_ZEROS)
     return Measurement(measurement.stamp_ns, z, covariance, indices, measurement.threshold,
-                       measurement.source)
+                       measurement.source, biased)

@@ -18,13 +18,13 @@ import math
 import numpy as np
 
 from estimation_nodes.core.fusion.state import (
-    AX, AY, AZ, PITCH, ROLL, STATE_SIZE, VPITCH, VROLL, VX, VY, VYAW, VZ, X, Y, YAW, Z)
+    AX, AY, AZ, PITCH, ROLL, VPITCH, VROLL, VX, VY, VYAW, VZ, X, Y, YAW, Z)
 from estimation_nodes.core.validation import FloatArray
 
 
 def transfer(x: FloatArray, dt: float) -> FloatArray:
     """The transition matrix at the state's angles: x' = F x."""
-    f = np.eye(STATE_SIZE)
+    f = np.eye(x.shape[0])      # gyro biases past the 15 entries: constant
     write_transfer(x, dt, f)
     return f
 

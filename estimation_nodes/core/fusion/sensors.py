@@ -19,6 +19,7 @@ non-finite number is dropped and counted, so it is never remembered.
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass, field
@@ -50,6 +51,9 @@ class SensorConfig:
     relative: bool = False
     differential: bool = False
     queue_size: int = 10
+    #: An IMU whose gyro bias the filter estimates: the state entry of its roll rate's
+    #: bias (pitch's and yaw's follow), None when not (beyond the peer).
+    gyro_bias: int | None = None
 
     # What follows from the configuration alone is worked out once (a frozen dataclass
     # keeps a cached_property in its __dict__): every message asks it.
@@ -77,6 +81,13 @@ class SensorConfig:
     def rate_entries(self) -> tuple[bool, ...]:
         """The update mask of an IMU's rates part: an IMU has no linear velocity."""
         return _entries(self.update, VROLL, VROLL + 3)
+
+
+def gyro_biases(sensors: dict[str, SensorConfig], x: FloatArray) -> dict[str, FloatArray]:
+    """Each IMU's estimated gyro bias (roll, pitch, yaw rates, rad/s, in the robot's
+    frame) in the state ``x``, by input name."""
+    return {name: x[sensor.gyro_bias:sensor.gyro_bias + 3]
+            for name, sensor in sensors.items() if sensor.gyro_bias is not None}
 
 
 #: The name ``set_pose`` goes by in the counts.
@@ -323,9 +334,9 @@ class SensorInputs:
             made.append(self._imu_attitude(sensor, stamp, quaternion,
                                            _matrix3(msg.orientation_covariance), mount))
         if rates:
-            made.append(inputs.imu_measurement(
+            made.append(_with_gyro_bias(sensor, inputs.imu_measurement(
                 stamp, z, covariance, sensor.rate_entries, TWIST, mount,
-                sensor.twist_threshold, names.twist))
+                sensor.twist_threshold, names.twist)))
         if acceleration:
             made.append(inputs.imu_measurement(stamp, z, covariance, update, ACCELERATION,
                                                mount, sensor.acceleration_threshold,
@@ -356,6 +367,17 @@ class SensorInputs:
             return rotation_from_rpy(*fusion.x[ROLL:ROLL + 3]) @ mount.rotation
         reported = rotation_from_quaternion(*quaternion)
         return reported @ mount.rotation if sensor.relative else reported
+
+
+def _with_gyro_bias(sensor: SensorConfig, measurement: Measurement | None
+                    ) -> Measurement | None:
+    """An IMU's rates, read as the rates plus its gyro's bias when the filter estimates
+    that (the bias in the robot's frame: the mount turns a bias as it turns the rates)."""
+    if measurement is None or sensor.gyro_bias is None:
+        return measurement
+    biased = tuple((index, sensor.gyro_bias + index - VROLL) for index in measurement.indices
+                   if VROLL <= index < VROLL + 3)
+    return dataclasses.replace(measurement, biased=biased)
 
 
 def _present(covariance) -> bool:

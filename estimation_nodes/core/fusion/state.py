@@ -2,7 +2,8 @@
 
 The state is x, y, z, roll, pitch, yaw (the pose in the world frame), vx, vy, vz,
 vroll, vpitch, vyaw (the twist in the robot's frame) and ax, ay, az (the linear
-acceleration in the robot's frame). Rotations follow tf2: ``rotation_from_rpy`` is
+acceleration in the robot's frame); after them, 3 entries per IMU whose gyro bias is
+estimated. Rotations follow tf2: ``rotation_from_rpy`` is
 ``Matrix3x3::setRPY`` (R = Rz(yaw) Ry(pitch) Rx(roll)), ``rpy_from_rotation`` its
 ``getRPY``, ``wrap`` is ``angles::normalize_angle`` (into [-pi, pi]).
 """
@@ -21,6 +22,9 @@ STATE_SIZE = 15
 NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz",
          "vroll", "vpitch", "vyaw", "ax", "ay", "az")
 ANGLES = (ROLL, PITCH, YAW)
+#: Entries a gyro's estimated bias takes after the 15 (its roll, pitch and yaw rates'
+#: biases, in the robot's frame): beyond the peer, for the IMUs that ask for it.
+GYRO_BIAS_SIZE = 3
 POSE = slice(X, YAW + 1)
 ORIENTATION = slice(ROLL, YAW + 1)
 TWIST = slice(VX, VYAW + 1)

@@ -1,7 +1,10 @@
 """The EKF and UKF steps over robot_localization's state (the book's symbols: x, P, Q, R, K).
 
 A measurement gives values for a subset of the state (``Measurement.indices``), so its
-H is a selection of rows of the identity. Both filters:
+H is a selection of rows of the identity; a gyro whose bias is estimated adds the bias's
+state entry to the rate it measures (``Measurement.biased``: H's row has a second 1).
+The state is robot_localization's 15 entries, then 3 per IMU whose gyro bias it holds
+(their motion: constant, a random walk by their process noise). Both filters:
 - predict with the motion model and P' = ... + dt Q (the process noise is a rate);
 - correct with the innovation's angles wrapped, and skip a measurement whose squared
   Mahalanobis distance reaches its threshold squared (``Rejected``);
@@ -15,7 +18,9 @@ ones from the corrected covariance. Functions return new values; inputs are left
 
 Each step runs as compiled.py's kernel where numba imports (``compiled=True``, the
 default), else as its ``*_numpy`` twin here, the reference the kernels are tested equal
-to: numpy's calls on 15 x 15 arrays cost more than their arithmetic.
+to: numpy's calls on 15 x 15 arrays cost more than their arithmetic. The kernels are
+the 15-entry filter's; a state with gyro biases, or a biased measurement, takes the
+numpy steps.
 """
 
 from __future__ import annotations
@@ -71,6 +76,9 @@ class Measurement:
     threshold: float = math.inf
     #: Where it came from ("odom0_twist", ...), for diagnostics.
     source: str = ""
+    #: (measured entry, bias entry) pairs: the value read is the entry plus the bias (a
+    #: gyro's rate and its bias's state entry).
+    biased: tuple[tuple[int, int], ...] = ()
 
     #: ``indices`` as the kernels take them (one array per set of indices, shared by the
     #: measurements that have it: never changed in place).
@@ -137,6 +145,21 @@ def _wrap_angle_entries(vector: FloatArray, indices: tuple[int, ...]) -> FloatAr
     return wrapped
 
 
+def _uses_kernels(x: FloatArray, measurement: Measurement | None = None) -> bool:
+    """Whether the compiled kernels fit: the 15-entry state, a plain selection H."""
+    return x.shape[0] == STATE_SIZE and (measurement is None or not measurement.biased)
+
+
+def observation_matrix(measurement: Measurement, size: int) -> FloatArray:
+    """H: the rows of the identity at the measured entries, each biased one with a 1 at its
+    bias's entry too."""
+    h = np.eye(size)[list(measurement.indices)]
+    rows = {index: row for row, index in enumerate(measurement.indices)}
+    for measured, bias in measurement.biased:
+        h[rows[measured], bias] += 1.0
+    return h
+
+
 def _check(innovation: np.ndarray, s_inverse: np.ndarray, threshold: float) -> None:
     _reject_beyond(float(innovation @ s_inverse @ innovation), threshold)
 
@@ -149,7 +172,7 @@ def _reject_beyond(squared: float, threshold: float) -> None:
 def ekf_predict(x: FloatArray, p: FloatArray, q: FloatArray, dt: float,
                 compiled: bool = True) -> tuple[FloatArray, FloatArray]:
     """x' = F(x) x, P' = J P J' + dt Q."""
-    compiled_steps = kernels(compiled)
+    compiled_steps = kernels(compiled and _uses_kernels(x))
     if compiled_steps is not None:
         return compiled_steps.ekf_predict(c_doubles(x), c_doubles(p), c_doubles(q), float(dt))
     return ekf_predict_numpy(x, p, q, dt)
@@ -166,7 +189,7 @@ def ekf_predict_numpy(x: FloatArray, p: FloatArray, q: FloatArray, dt: float
 def ekf_correct(x: FloatArray, p: FloatArray, measurement: Measurement,
                 compiled: bool = True) -> tuple[FloatArray, FloatArray]:
     """K = P H' (H P H' + R)^-1, x' = x + K y, P' = (I - K H) P (I - K H)' + K R K'."""
-    compiled_steps = kernels(compiled)
+    compiled_steps = kernels(compiled and _uses_kernels(x, measurement))
     if compiled_steps is not None:
         squared, x_new, p_new = compiled_steps.ekf_correct(
             c_doubles(x), c_doubles(p), c_doubles(measurement.z),
@@ -179,6 +202,8 @@ def ekf_correct(x: FloatArray, p: FloatArray, measurement: Measurement,
 def ekf_correct_numpy(x: FloatArray, p: FloatArray, measurement: Measurement
                       ) -> tuple[FloatArray, FloatArray]:
     """``ekf_correct`` over numpy arrays."""
+    if measurement.biased:
+        return _ekf_correct_biased(x, p, measurement)
     idx = list(measurement.indices)
     z, r = subset(measurement)
     pht = p[:, idx]                       # P H' with H the rows idx of the identity
@@ -186,29 +211,46 @@ def ekf_correct_numpy(x: FloatArray, p: FloatArray, measurement: Measurement
     k = pht @ s_inverse
     innovation = _wrap_angle_entries(z - x[idx], measurement.indices)
     _check(innovation, s_inverse, measurement.threshold)
-    gain_residual = np.eye(STATE_SIZE)
+    gain_residual = np.eye(x.shape[0])
     gain_residual[:, idx] -= k
+    p_new = gain_residual @ p @ gain_residual.T + k @ r @ k.T
+    return wrap_state_angles(x + k @ innovation), p_new
+
+
+def _ekf_correct_biased(x: FloatArray, p: FloatArray, measurement: Measurement
+                        ) -> tuple[FloatArray, FloatArray]:
+    """``ekf_correct_numpy`` with H written out (``observation_matrix``)."""
+    z, r = subset(measurement)
+    h = observation_matrix(measurement, x.shape[0])
+    pht = p @ h.T
+    s_inverse = np.linalg.inv(h @ pht + r)
+    k = pht @ s_inverse
+    innovation = _wrap_angle_entries(z - h @ x, measurement.indices)
+    _check(innovation, s_inverse, measurement.threshold)
+    gain_residual = np.eye(x.shape[0]) - k @ h
     p_new = gain_residual @ p @ gain_residual.T + k @ r @ k.T
     return wrap_state_angles(x + k @ innovation), p_new
 
 
 @dataclass(frozen=True)
 class UnscentedWeights:
-    """The scaled unscented transform's parameters and weights for n = 15."""
+    """The scaled unscented transform's parameters and weights for n = ``size`` (15, or
+    more with gyro biases)."""
 
     alpha: float = 0.001
     kappa: float = 0.0
     beta: float = 2.0
+    size: int = STATE_SIZE
 
     @functools.cached_property
     def lam(self) -> float:
-        return self.alpha * self.alpha * (STATE_SIZE + self.kappa) - STATE_SIZE
+        return self.alpha * self.alpha * (self.size + self.kappa) - self.size
 
     @functools.cached_property
     def mean(self) -> FloatArray:
         """The mean's weights (read-only: computed once, shared by every step)."""
-        w = np.full(2 * STATE_SIZE + 1, 1.0 / (2.0 * (STATE_SIZE + self.lam)))
-        w[0] = self.lam / (STATE_SIZE + self.lam)
+        w = np.full(2 * self.size + 1, 1.0 / (2.0 * (self.size + self.lam)))
+        w[0] = self.lam / (self.size + self.lam)
         w.flags.writeable = False
         return w
 
@@ -223,7 +265,7 @@ class UnscentedWeights:
 
 def sigma_points(x: FloatArray, p: FloatArray, weights: UnscentedWeights) -> FloatArray:
     """2n + 1 points (rows): x, x + the columns of chol((n + lambda) P), x - them."""
-    scaled = (STATE_SIZE + weights.lam) * p
+    scaled = (weights.size + weights.lam) * p
     try:
         root = np.linalg.cholesky(scaled)
     except np.linalg.LinAlgError:
@@ -259,7 +301,7 @@ def ukf_predict(x: FloatArray, p: FloatArray, q: FloatArray, dt: float,
                 weights: UnscentedWeights, compiled: bool = True
                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Propagate the sigma points; (x', P', the propagated points)."""
-    compiled_steps = kernels(compiled)
+    compiled_steps = kernels(compiled and _uses_kernels(x))
     if compiled_steps is not None:
         drawn, x_new, p_new, points = compiled_steps.ukf_predict(
             c_doubles(x), c_doubles(p), c_doubles(q), float(dt), STATE_SIZE + weights.lam,
@@ -277,7 +319,7 @@ def ukf_predict_numpy(x: FloatArray, p: FloatArray, q: FloatArray, dt: float,
                        for point in sigma_points(x, p, weights)])
     w_cov = weights.covariance
     mean = unscented_mean(points, weights.mean, list(ANGLES))
-    diff = _wrap_angle_entries(points - mean, tuple(range(STATE_SIZE)))
+    diff = _wrap_angle_entries(points - mean, tuple(range(x.shape[0])))
     p_new = (diff * w_cov[:, None]).T @ diff + dt * q
     return wrap_state_angles(mean), p_new, points
 
@@ -286,7 +328,7 @@ def ukf_correct(x: FloatArray, p: FloatArray, measurement: Measurement,
                 weights: UnscentedWeights, points: FloatArray | None, compiled: bool = True
                 ) -> tuple[FloatArray, FloatArray]:
     """Correct with ``points`` (the propagated ones), or new ones from (x, P) when None."""
-    compiled_steps = kernels(compiled)
+    compiled_steps = kernels(compiled and _uses_kernels(x, measurement))
     if compiled_steps is None:
         return ukf_correct_numpy(x, p, measurement, weights, points)
     x, p = c_doubles(x), c_doubles(p)
@@ -315,11 +357,12 @@ def ukf_correct_numpy(x: FloatArray, p: FloatArray, measurement: Measurement,
     idx = list(measurement.indices)
     z, r = subset(measurement)
     w_cov = weights.covariance
-    predicted_points = points[:, idx]
+    predicted_points = points[:, idx] if not measurement.biased else \
+        points @ observation_matrix(measurement, x.shape[0]).T
     predicted = unscented_mean(predicted_points, weights.mean, [
         row for row, index in enumerate(measurement.indices) if index in ANGLES])
     z_diff = _wrap_angle_entries(predicted_points - predicted, measurement.indices)
-    x_diff = _wrap_angle_entries(points - x, tuple(range(STATE_SIZE)))
+    x_diff = _wrap_angle_entries(points - x, tuple(range(x.shape[0])))
     s = (z_diff * w_cov[:, None]).T @ z_diff
     cross = (x_diff * w_cov[:, None]).T @ z_diff
     s_inverse = np.linalg.inv(s + r)

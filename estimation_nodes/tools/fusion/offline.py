@@ -20,7 +20,7 @@ import numpy as np
 from estimation_nodes.core.fusion.control import DroppedCommand, command_message
 from estimation_nodes.core.fusion.filter import FusionFilter
 from estimation_nodes.core.fusion.inputs import Mount
-from estimation_nodes.core.fusion.sensors import SensorInputs
+from estimation_nodes.core.fusion.sensors import SensorInputs, gyro_biases
 from estimation_nodes.params.fusion import FusionConfig, FusionConfigError, fusion_config, \
     parameters_of_file
 from estimation_nodes.tools.recording import bags
@@ -140,6 +140,9 @@ def main(argv: list[str] | None = None) -> int:
           f"({len(result.outputs)} periodic outputs)")
     print(f"measurements applied {result.fusion.counts.applied}, "
           f"rejected {result.fusion.counts.rejected}, dropped {result.inputs.dropped}")
+    for name, bias in gyro_biases(config.sensors, x).items():
+        print(f"{name} gyro bias {' '.join(f'{v:.6f}' for v in bias)} rad/s (roll, pitch, "
+              f"yaw rates)")
     if config.settings.history_ns is not None:
         print(f"late, put in their place {result.fusion.counts.smoothed}, "
               f"older than history_length {result.fusion.counts.beyond_history}")
