@@ -1,18 +1,24 @@
 """The package's dependencies (the metadata is in pyproject.toml).
 
-They live here rather than in pyproject.toml because one of them is this repository's own
-``interfaces/tf2_msgs``: ``tf2_msgs/msg/TFMessage`` (``/tf``, ``/tf_static``) is not on PyPI,
-so pip builds it from its interface definition, and a pip dependency on a local directory
-must be an absolute ``file:`` URL, known only when this file runs. A ROS install's own
-tf2_msgs, on ``PYTHONPATH`` ahead of the environment's packages, is the one imported; a
-colcon build in a ROS workspace takes tf2_msgs from ROS (package.xml) and ignores these.
+They live here rather than in pyproject.toml because two of them are this repository's own
+``interfaces/``: ``tf2_msgs/msg/TFMessage`` (``/tf``, ``/tf_static``) and robot_localization's
+services ``SetPose`` and ``ToggleFilterProcessing`` (ekf_node's ``set_pose`` and ``toggle``)
+are not on PyPI, so pip builds them from their interface definitions, and a pip dependency
+on a local directory must be an absolute ``file:`` URL, known only when this file runs. A
+ROS install's own packages, on ``PYTHONPATH`` ahead of the environment's, are the ones
+imported; a colcon build in a ROS workspace builds neither (colcon does not look for
+packages inside a package's folder) and takes tf2_msgs from ROS (package.xml), and
+robot_localization's services from ROS where robot_localization is installed.
 """
 
 from pathlib import Path
 
 from setuptools import setup
 
-TF2_MSGS = Path(__file__).resolve().parent / "interfaces" / "tf2_msgs"
+INTERFACES = Path(__file__).resolve().parent / "interfaces"
+#: Directory -> the pip project it builds.
+OWN_INTERFACES = {"tf2_msgs": "estimation-nodes-tf2-msgs",
+                  "robot_localization": "estimation-nodes-robot-localization-srvs"}
 
 DEPENDENCIES = [
     "ros-jazzy-rclpy",
@@ -35,7 +41,8 @@ DEPENDENCIES = [
     # duplicate it.
     "rosbags",
 ]
-if TF2_MSGS.is_dir():
-    DEPENDENCIES.append(f"estimation-nodes-tf2-msgs @ {TF2_MSGS.as_uri()}")
+for folder, project in OWN_INTERFACES.items():
+    if (INTERFACES / folder).is_dir():
+        DEPENDENCIES.append(f"{project} @ {(INTERFACES / folder).as_uri()}")
 
 setup(install_requires=DEPENDENCIES)

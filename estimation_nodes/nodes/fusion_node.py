@@ -40,6 +40,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data, QoSProfile
 from sensor_msgs.msg import Imu
+from std_srvs.srv import Empty
+
+try:   # robot_localization's own service types: its install's, or the ones pip builds
+    from robot_localization.srv import SetPose, ToggleFilterProcessing
+except ImportError:   # a ROS workspace without robot_localization: the topic only
+    SetPose = ToggleFilterProcessing = None
 
 from estimation_nodes.core.fusion import steps
 from estimation_nodes.core.fusion.control import DroppedCommand, command_message
@@ -116,6 +122,7 @@ class FusionNode(Node):
                                       for sensor in self._config.sensors.values()]
         self._set_pose_subscription = self.create_subscription(
             PoseWithCovarianceStamped, "set_pose", self._on_set_pose, 1)
+        self._create_services()
         if self._config.settings.control is not None:
             self._control_subscription = self.create_subscription(
                 TwistStamped if self._config.stamped_control else Twist, "cmd_vel",
@@ -178,6 +185,46 @@ class FusionNode(Node):
             return
         self._fusion.command(command, stamp_ns)
 
+    def _create_services(self) -> None:
+        """The peer's services: ``reset`` (std_srvs/Empty), and ``set_pose`` and ``toggle``
+        where robot_localization's types import."""
+        #: Whether measurements are processed (the peer's ``toggle``).
+        self.processing = True
+        self._reset_service = self.create_service(Empty, "reset", self._on_reset)
+        if SetPose is None:
+            self.get_logger().info(
+                "robot_localization's service types are not installed: no set_pose or toggle "
+                "service (the set_pose topic works)")
+            return
+        self._set_pose_service = self.create_service(SetPose, "set_pose",
+                                                     self._on_set_pose_request)
+        self._toggle_service = self.create_service(ToggleFilterProcessing, "toggle",
+                                                   self._on_toggle)
+
+    def _on_set_pose_request(self, request, response):
+        """The ``set_pose`` service: the topic's message, as the peer's does."""
+        self._on_set_pose(request.pose)
+        return response
+
+    def _on_reset(self, request, response):
+        self.get_logger().info("Received a request to reset filter.")
+        self._reset()
+        return response
+
+    def _on_toggle(self, request, response):
+        """Measurements processed or not; the estimate is published either way (the peer's
+        ``toggle``)."""
+        if request.on == self.processing:
+            self.get_logger().warning("Service was called to toggle filter processing but "
+                                      "state was already as requested.")
+            response.status = False
+        else:
+            self.get_logger().info(f"Toggling filter measurement filtering to "
+                                   f"{'On' if request.on else 'Off'}.")
+            self.processing = request.on
+            response.status = True
+        return response
+
     def _on_set_pose(self, msg: PoseWithCovarianceStamped) -> None:
         """The estimate put at the pose (the peer's set_pose topic)."""
         self._mount_from_tf(self._config.world_frame, msg.header.frame_id, msg.header.stamp)
@@ -205,16 +252,24 @@ class FusionNode(Node):
 
     def _on_time_jump_back(self) -> None:
         """A clock that went back (a bag played again): start over, as the peer does."""
+        self._reset()
+        self.get_logger().warning("time jumped back: the filter was reset")
+
+    def _reset(self) -> None:
+        """Uninitialized, nothing queued, the inputs' first and last messages forgotten."""
         self._fusion.reset()
         self._inputs = self._config.sensor_inputs(self._given_mounts)
         self._last_published_ns = -1
         self.resets += 1
-        self.get_logger().warning("time jumped back: the filter was reset")
 
     def _on_timer(self) -> None:
         now_ns = self.get_clock().now().nanoseconds
-        self._fusion.update(now_ns)
-        self._fusion.differentiate(now_ns)
+        if self.processing:
+            self._fusion.update(now_ns)
+            self._fusion.differentiate(now_ns)
+        else:
+            for measurement in self._fusion.pause(now_ns):
+                self._inputs.drop(f"{measurement.source}: processing toggled off")
         if not self._fusion.initialized or self._fusion.last_time_ns <= self._last_published_ns:
             return
         if not (np.all(np.isfinite(self._fusion.x)) and np.all(np.isfinite(self._fusion.p))):

@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import re
 import subprocess
+import sysconfig
 import threading
 import time
 
@@ -403,3 +404,25 @@ def lifecycle(ros2, verb: str, *args: str, attempts: int = 5) -> subprocess.Comp
             break
     assert done.returncode == 0, done.stdout
     return done
+
+
+@time_limit(120)
+def test_ekf_node_takes_the_peers_set_pose_service_from_the_cli(ros2, ros2_start, cli_env):
+    """`ros2 service call /set_pose robot_localization/srv/SetPose`: the peer's own type
+    (built by the install where robot_localization is not), its estimate moved there. The
+    CLI lives in an environment of its own here, so it is shown the install's types."""
+    twist = "[" + ",".join(["false"] * 6 + ["true"] * 3 + ["false"] * 6) + "]"
+    start_nodes(ros2, ros2_start, "ekf_node", args=(
+        "--ros-args", "-r", "__node:=ekf_node", "-p", "odom0:=wheel/odom",
+        "-p", f"odom0_config:={twist}"))
+    pub_once(ros2, "/wheel/odom", "nav_msgs/msg/Odometry",
+             "{header: {frame_id: odom}, child_frame_id: base_link}")
+    site = sysconfig.get_paths()["purelib"]
+    called = subprocess.run(
+        ["ros2", "service", "call", "/set_pose", "robot_localization/srv/SetPose",
+         "{pose: {header: {frame_id: odom}, pose: {pose: {position: {x: 2.5}}}}}"],
+        env={**cli_env, "PYTHONPATH": site}, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        text=True, timeout=60)
+    assert called.returncode == 0 and "response" in called.stdout, called.stdout
+    position = echo(ros2, "/odometry/filtered")["pose"]["pose"]["position"]
+    assert position["x"] == pytest.approx(2.5) and position["y"] == pytest.approx(0.0)

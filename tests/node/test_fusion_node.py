@@ -301,3 +301,46 @@ def test_an_estimated_gyro_bias_is_reported_in_diagnostics(fusion_node, collecto
     assert spin_until(executor, lambda: bool(collector.messages["/diagnostics"]), 10.0)
     values = {v.key: v.value for v in collector.messages["/diagnostics"][-1].status[0].values}
     assert values["imu0 gyro bias (rad/s)"] == "0.000000 0.000000 0.000000"
+
+
+def call(executor, client, request):
+    assert spin_until(executor, client.service_is_ready, 10.0)
+    future = client.call_async(request)
+    assert spin_until(executor, future.done, 10.0)
+    return future.result()
+
+
+def test_the_peers_services_set_pose_reset_and_toggle(fusion_node, make_node, executor):
+    """robot_localization's types (its install's, or the ones the pip install builds)."""
+    from robot_localization.srv import SetPose, ToggleFilterProcessing
+    from std_srvs.srv import Empty
+
+    node = fusion_node()
+    operator = make_node("operator")
+    t0 = node.get_clock().now().nanoseconds
+    on_odom = node._sensor_subscriptions[0].callback
+    on_odom(odom(t0, 0.0, 0.0))
+    assert spin_until(executor, lambda: node._fusion.initialized, 10.0)
+
+    request = SetPose.Request(pose=pose_stamped(t0 + 1, "odom", (4.0, -3.0, 0.0), 1.0))
+    call(executor, operator.create_client(SetPose, "set_pose"), request)
+    assert node._fusion.x[0] == pytest.approx(4.0) and node._fusion.x[1] == pytest.approx(-3.0)
+
+    toggle = operator.create_client(ToggleFilterProcessing, "toggle")
+    assert call(executor, toggle, ToggleFilterProcessing.Request(on=False)).status
+    assert not call(executor, toggle, ToggleFilterProcessing.Request(on=False)).status
+    now = node.get_clock().now().nanoseconds
+    on_odom(odom(now, 1.0, 0.0))
+    assert spin_until(executor, lambda: node._inputs.dropped.get(
+        "odom0_twist: processing toggled off") == 1, 10.0)
+    assert node._fusion.x[6] == 0.0                 # not taken
+    assert call(executor, toggle, ToggleFilterProcessing.Request(on=True)).status
+
+    def taken() -> bool:
+        on_odom(odom(node.get_clock().now().nanoseconds, 1.0, 0.0))
+        return node._fusion.x[6] > 0.5
+
+    assert spin_until(executor, taken, 10.0)
+
+    call(executor, operator.create_client(Empty, "reset"), Empty.Request())
+    assert not node._fusion.initialized and node.resets == 1

@@ -187,3 +187,19 @@ def test_the_peers_parameters_and_their_warnings():
     for bad in (float("nan"), "long"):
         with pytest.raises(FusionConfigError, match="history_length: expected a finite time"):
             fusion_config({"smooth_lagged_data": True, "history_length": bad})
+
+
+def test_a_pause_drops_the_queue_and_nothing_goes_back_before_it():
+    """The peer's toggle off: what was queued is dropped and returned, the filter's time is
+    the pause's; with the history, a measurement from before the pause is not put back."""
+    fusion = FusionFilter(settings())
+    fusion.enqueue(reading(0, 1.0))
+    fusion.update(0)
+    fusion.enqueue(reading(20, 2.0))
+    assert [m.stamp_ns for m in fusion.pause(50 * MS)] == [20 * MS]
+    assert fusion.queued == 0 and fusion.last_time_ns == 50 * MS
+    x = fusion.x.copy()
+    fusion.enqueue(reading(30, 5.0))
+    fusion.update(60 * MS)
+    assert fusion.counts.beyond_history == {"odom0_twist": 1}
+    assert fusion.x[state.VX] > x[state.VX] and fusion.last_time_ns == 50 * MS

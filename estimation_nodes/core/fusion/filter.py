@@ -121,7 +121,8 @@ class FusionFilter:
         #: forgets the command, as the peer's does.
         self.control = Control(self.settings.control) if self.settings.control else None
         history_ns = self.settings.history_ns
-        self._set_pose_ns = -1 << 62
+        # The time nothing is put back before: the last set_pose or pause (smoothing).
+        self._history_floor_ns = -1 << 62
         self._history = None if history_ns is None else CausalOrder(self, history_ns,
                                                                     MAX_EVENTS)
 
@@ -180,7 +181,7 @@ class FusionFilter:
         self._queue.clear()
         if self._history is not None:
             self._history.clear()   # nothing goes back before the pose it was put at
-        self._set_pose_ns = now_ns
+        self._history_floor_ns = now_ns
         self.last_time_ns = now_ns
         self.counts.add(self.counts.applied, measurement.source)
 
@@ -251,11 +252,11 @@ class FusionFilter:
         stamp_ns = measurement.stamp_ns
         # Late as the peer counts it: older than the filter's time.
         late = self.initialized and stamp_ns < self.last_time_ns
-        # Nothing goes back before a set pose: an older one is taken at the pose's time.
-        before_pose = stamp_ns < self._set_pose_ns
-        submission = self._history.submit(max(stamp_ns, self._set_pose_ns), RANK_MEASUREMENT,
-                                          measurement)
-        if submission.too_late or before_pose:
+        # Nothing goes back before a set pose (or a pause): an older one is taken then.
+        before_floor = stamp_ns < self._history_floor_ns
+        submission = self._history.submit(max(stamp_ns, self._history_floor_ns),
+                                          RANK_MEASUREMENT, measurement)
+        if submission.too_late or before_floor:
             self.counts.add(self.counts.beyond_history, measurement.source)
         elif late:
             self.counts.add(self.counts.smoothed, measurement.source)
@@ -299,6 +300,19 @@ class FusionFilter:
         assert self.control is not None
         self.control.set(event.command, event.stamp_ns)
         return True
+
+    def pause(self, now_ns: int) -> list[Measurement]:
+        """The periodic step with processing toggled off (the peer's ``toggle``): what was
+        queued is dropped (returned, to count) and the filter's time is ``now_ns``, so
+        that the first prediction after does not span the pause."""
+        dropped = [measurement for _, _, measurement in self._queue]
+        self._queue.clear()
+        if self.initialized:
+            self.last_time_ns = now_ns
+            if self._history is not None:
+                self._history.clear()   # the state before the pause is not to be rebuilt
+                self._history_floor_ns = now_ns
+        return dropped
 
     def differentiate(self, now_ns: int) -> None:
         """The angular acceleration since the last periodic step (the peer's estimate)."""
