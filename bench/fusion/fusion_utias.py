@@ -20,6 +20,12 @@ others being the validation; nothing is tuned to the share:
   windows of 5 s to 320 s, the horizons a run on odometry alone spans (it grows faster
   than a random walk's would: the robots' turns are biased, not only noisy);
 - every other entry: the peer's defaults.
+
+A third table asks what one run's share can say: runs of a robot drawn as the filter
+believes it moves (its commands off by the twist's variances, its heading and position
+walking by the process noise; ``own_model_shares``), scored against this run's outputs.
+The errors of one run accumulate, so its share is not a fraction of independent trials:
+how widely it spreads when the model is right is what the table shows.
 Nothing is asserted here; tests/unit/test_fusion_consistency.py checks one robot.
 """
 
@@ -197,6 +203,11 @@ class Consistency:
     #: At the last output: the position error (m) and sqrt(var x + var y) (m).
     final_error: float
     final_spread: float
+    #: Each output scored: its time (s), the position's estimate and covariance (for
+    #: ``own_model_shares``).
+    times: np.ndarray
+    estimates: np.ndarray
+    covariances: np.ndarray
 
 
 def consistency(run: UtiasRun, figures: NoiseFigures) -> Consistency:
@@ -217,7 +228,38 @@ def consistency(run: UtiasRun, figures: NoiseFigures) -> Consistency:
         outputs=len(held), share=float(np.mean(held)),
         thirds=tuple(float(np.mean(held[k * third:(k + 1) * third])) for k in range(3)),
         final_error=float(np.hypot(*errors[-1])),
-        final_spread=float(math.sqrt(covariances[-1, 0, 0] + covariances[-1, 1, 1])))
+        final_spread=float(math.sqrt(covariances[-1, 0, 0] + covariances[-1, 1, 1])),
+        times=times[inside], estimates=estimates, covariances=covariances)
+
+
+def own_model_shares(run: UtiasRun, figures: NoiseFigures, result: Consistency, runs: int,
+                     seed: int = 1) -> np.ndarray:
+    """The share of outputs inside the 95% ellipse in each of ``runs`` drawn runs of a
+    robot that moves as the filter believes: each command's speed and turn off the true
+    ones by the twist's variances (independent per command), the heading and the position
+    walking by the process noise, from the filter's start. The filter's estimates and
+    covariances are this run's (they depend on the commands alone)."""
+    rng = np.random.default_rng(seed)
+    commands = run.odometry
+    dt = np.diff(commands[:, 0], append=commands[-1, 0])
+    start = truth_at(run, commands[:1, 0])[0]
+    heading = np.full(runs, start[2])
+    position = np.tile(start[:2], (runs, 1))
+    truths = np.empty((len(commands), runs, 2))
+    for k, ((_, v, w), step) in enumerate(zip(commands.tolist(), dt.tolist())):
+        truths[k] = position
+        speed = v + rng.normal(0.0, math.sqrt(figures.speed_variance), runs)
+        turn = w + rng.normal(0.0, math.sqrt(figures.turn_variance), runs)
+        position = position + (speed * step)[:, None] * np.column_stack(
+            [np.cos(heading), np.sin(heading)]) + rng.normal(
+            0.0, math.sqrt(figures.position_rate * step), (runs, 2))
+        heading = heading + turn * step + rng.normal(0.0, math.sqrt(figures.heading_rate * step),
+                                                     runs)
+    # The truth at each output: the last command's at or before it.
+    at = np.searchsorted(commands[:, 0], result.times, side="right") - 1
+    errors = truths[np.clip(at, 0, None)] - result.estimates[:, None, :]
+    squared = np.einsum("nri,nij,nrj->nr", errors, np.linalg.inv(result.covariances), errors)
+    return np.mean(squared <= ELLIPSE_95, axis=0)
 
 
 def main() -> None:
@@ -226,6 +268,9 @@ def main() -> None:
     parser.add_argument("--fit-robot", type=int, default=1,
                         help="the robot whose data give the noise figures (1)")
     parser.add_argument("--robots", type=int, nargs="+", default=[1, 2, 3])
+    parser.add_argument("--model-runs", type=int, default=400,
+                        help="runs drawn per robot for the share under the filter's own "
+                             "covariance (0: none)")
     args = parser.parse_args()
     if not args.dataset.is_dir():
         sys.exit(f"fusion_utias: no dataset at {args.dataset} (see ../shared/data/README.md)")
@@ -234,9 +279,9 @@ def main() -> None:
           f"{figures.speed_variance:.3g} m^2/s^2 (vx, vy), {figures.turn_variance:.3g} "
           f"rad^2/s^2 (vyaw); process noise {figures.position_rate:.3g} m^2/s (x, y), "
           f"{figures.heading_rate:.3g} rad^2/s (yaw)")
-    rows = []
+    rows, results = [], {}
     for robot in args.robots:
-        result = consistency(read_run(args.dataset, robot), figures)
+        result = results[robot] = consistency(read_run(args.dataset, robot), figures)
         rows.append([str(robot), "fitted" if robot == args.fit_robot else "validation",
                      str(result.outputs), f"{100 * result.share:.1f}%",
                      " / ".join(f"{100 * share:.0f}%" for share in result.thirds),
@@ -253,6 +298,27 @@ def main() -> None:
     print(table(["robot", "turn bias mrad/s", "random walk rad^2/s", "as one rate rad^2/s"],
                 [[str(robot), f"{1e3 * drift.bias:+.2f}", f"{drift.walk_rate:.4f}",
                   f"{drift.total_rate:.4f}"] for robot, drift in drifts]))
+    if args.model_runs:
+        print_own_model_shares(args.dataset, figures, results, args.model_runs)
+
+
+def print_own_model_shares(dataset: Path, figures: NoiseFigures,
+                           results: dict[int, Consistency], runs: int) -> None:
+    rows = []
+    for robot, result in results.items():
+        shares = own_model_shares(read_run(dataset, robot), figures, result, runs)
+        rows.append([str(robot), f"{100 * result.share:.1f}%",
+                     f"{100 * np.mean(shares):.1f}%",
+                     " / ".join(f"{100 * q:.1f}%" for q in np.quantile(shares, [0.05, 0.5])),
+                     f"{100 * np.mean((shares >= 0.85) & (shares <= 0.99)):.0f}%",
+                     f"{100 * np.mean(shares > 0.99):.0f}%",
+                     f"{100 * np.mean(shares >= 1.0):.0f}%",
+                     f"{100 * np.mean(shares <= result.share):.0f}%"])
+    print(f"\nif the robot moved as the filter believes ({runs} drawn runs per robot, the "
+          "filter's outputs this run's): the share one run shows")
+    print(table(["robot", "this run", "mean of the drawn", "5th / 50th percentile",
+                 "drawn within 85..99%", "drawn above 99%", "drawn at 100%",
+                 "drawn at or below this run"], rows))
 
 
 if __name__ == "__main__":
