@@ -69,6 +69,8 @@ SENSOR_MOUNTS = "sensor_mounts"
 DIAGNOSTICS_PERIOD = 1.0
 #: The count of late measurements put in their place (smooth_lagged_data): not a problem.
 LATE_SMOOTHED = "late, put in its place"
+#: ... and of those older than the last set_pose or toggle off, taken at its time: asked for.
+LATE_BEFORE_RESET = "late, before the last set_pose or toggle off"
 
 
 def parse_mounts(entries: Sequence[str]) -> dict[str, Mount]:
@@ -241,7 +243,7 @@ class FusionNode(Node):
         counts = measurement_counts(self._fusion, self._inputs)
         problems = [f"{key}: {count - self._reported.get(key, 0)} since the last report"
                     for key, count in counts.items()
-                    if not key.endswith((" applied", LATE_SMOOTHED))
+                    if not key.endswith((" applied", LATE_SMOOTHED, LATE_BEFORE_RESET))
                     and count > self._reported.get(key, 0)]
         self._reported = counts
         biases = {f"{name} gyro bias (rad/s)": " ".join(f"{v:.6f}" for v in bias)
@@ -256,9 +258,12 @@ class FusionNode(Node):
         self.get_logger().warning("time jumped back: the filter was reset")
 
     def _reset(self) -> None:
-        """Uninitialized, nothing queued, the inputs' first and last messages forgotten."""
+        """Uninitialized, nothing queued, the inputs' first and last messages forgotten
+        (their counts kept, as the filter's are: /diagnostics counts since the start)."""
         self._fusion.reset()
+        dropped = self._inputs.dropped
         self._inputs = self._config.sensor_inputs(self._given_mounts)
+        self._inputs.dropped = dropped
         self._last_published_ns = -1
         self.resets += 1
 
@@ -335,6 +340,8 @@ def measurement_counts(fusion: FusionFilter, inputs: SensorInputs) -> dict[str, 
         values[f"{source} {LATE_SMOOTHED}"] = count
     for source, count in sorted(counts.beyond_history.items()):
         values[f"{source} late, older than history_length"] = count
+    for source, count in sorted(counts.before_floor.items()):
+        values[f"{source} {LATE_BEFORE_RESET}"] = count
     for reason, count in sorted(inputs.dropped.items()):
         part, _, why = reason.partition(": ")
         values[f"{part} dropped: {why}"] = count

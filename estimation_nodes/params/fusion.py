@@ -180,11 +180,15 @@ def _with_gyro_biases(settings: FusionSettings, params: dict[str, Any],
     random walk; nothing correlated with the 15 at the start."""
     variances, noises = [], []
     for sensor in sensors.values():
+        if sensor.kind != "imu":
+            continue
+        # Checked whether or not the bias is estimated: a typo fails either way.
+        variance = _positive(params, f"{sensor.name}_gyro_bias_variance", GYRO_BIAS_VARIANCE)
+        noise = _positive(params, f"{sensor.name}_gyro_bias_process_noise",
+                          GYRO_BIAS_PROCESS_NOISE)
         if sensor.gyro_bias is not None:
-            variances += [_positive(params, f"{sensor.name}_gyro_bias_variance",
-                                    GYRO_BIAS_VARIANCE)] * GYRO_BIAS_SIZE
-            noises += [_positive(params, f"{sensor.name}_gyro_bias_process_noise",
-                                 GYRO_BIAS_PROCESS_NOISE)] * GYRO_BIAS_SIZE
+            variances += [variance] * GYRO_BIAS_SIZE
+            noises += [noise] * GYRO_BIAS_SIZE
     if not variances:
         return settings
 
@@ -255,19 +259,29 @@ def fusion_config(params: dict[str, Any], kind: str | None = None) -> FusionConf
         print_diagnostics=bool(params.get("print_diagnostics", False)),
         stamped_control=bool(params.get("stamped_control", False)),
         unsupported=tuple(unsupported),
-        notes=notes + history_notes)
+        notes=notes + history_notes + _unused_gyro_bias_notes(params, sensors))
+
+
+def _unused_gyro_bias_notes(params: dict[str, Any], sensors: dict[str, SensorConfig]
+                            ) -> tuple[str, ...]:
+    """A line for each gyro bias figure given to an IMU whose bias is not estimated."""
+    return tuple(f"{name}{suffix} is given but {name}_gyro_bias is not true: not used"
+                 for name, sensor in sensors.items()
+                 if sensor.kind == "imu" and sensor.gyro_bias is None
+                 for suffix in GYRO_BIAS_SUFFIXES[1:] if f"{name}{suffix}" in params)
 
 
 def _history(params: dict[str, Any]) -> tuple[int | None, tuple[str, ...]]:
     """How far back late measurements are put in their place (``smooth_lagged_data``,
     ``history_length`` in s; None: not smoothed), and the lines to warn of (the peer's)."""
+    value = params.get("history_length", 0.0)
     try:
-        length = float(params.get("history_length", 0.0))
+        length = math.nan if isinstance(value, bool) else float(value)
     except (TypeError, ValueError):
         length = math.nan
     if not math.isfinite(length):
-        raise FusionConfigError("history_length: expected a finite time in s")
-    if not bool(params.get("smooth_lagged_data", False)):
+        raise FusionConfigError(f"history_length: expected a finite time in s, got {value!r}")
+    if not _flag(params, "smooth_lagged_data"):
         if length != 0.0:
             return None, (f"Filter history interval of {length} specified, but "
                           "smooth_lagged_data is set to false. Lagged data will not be "

@@ -344,3 +344,5 @@ def test_the_peers_services_set_pose_reset_and_toggle(fusion_node, make_node, ex
 
     call(executor, operator.create_client(Empty, "reset"), Empty.Request())
     assert not node._fusion.initialized and node.resets == 1
+    # /diagnostics counts since the start: a reset forgets the inputs' messages, not them.
+    assert node._inputs.dropped["odom0_twist: processing toggled off"] == 1

@@ -176,6 +176,11 @@ def test_the_parameters_grow_the_state_and_are_checked():
                                   [1e-3] * 3 + [0.5] * 3)
     np.testing.assert_array_equal(np.diag(settings.process_noise)[15:], [1e-8] * 3 + [1e-6] * 3)
     assert not np.any(settings.process_noise[:15, 15:])
+    unused = fusion_config({"imu0": "a", "imu0_config": GYRO, "imu0_gyro_bias_variance": 0.5})
+    assert unused.notes == ("imu0_gyro_bias_variance is given but imu0_gyro_bias is not "
+                            "true: not used",)
+    with pytest.raises(FusionConfigError, match="imu0_gyro_bias_process_noise"):
+        fusion_config({"imu0": "a", "imu0_config": GYRO, "imu0_gyro_bias_process_noise": -1})
     for name, value, message in [
             ("imu0_gyro_bias", "yes", "imu0_gyro_bias: expected true or false"),
             ("imu0_gyro_bias_variance", -1.0, "imu0_gyro_bias_variance: expected a positive"),
@@ -183,3 +188,17 @@ def test_the_parameters_grow_the_state_and_are_checked():
         with pytest.raises(FusionConfigError, match=message):
             fusion_config({"imu0": "a", "imu0_config": GYRO, "imu0_gyro_bias": True,
                            name: value})
+
+
+def test_a_first_reading_of_a_biased_gyro_starts_the_rate_with_the_bias_doubt():
+    """The rate is the reading less the bias (0 at first), with the reading's variance
+    plus the bias's, and the two tied: the joint Gaussian of rate = reading - bias."""
+    config = fusion_config({"imu0": "imu", "imu0_config": GYRO, "imu0_gyro_bias": True})
+    fusion = FusionFilter(config.settings)
+    measurement = gyro_reading()
+    fusion.process(measurement)
+    rates = slice(state.VROLL, state.VROLL + 3)
+    np.testing.assert_array_equal(fusion.x[rates], [0.1, -0.2, 0.3])
+    np.testing.assert_allclose(np.diag(fusion.p)[rates], 0.01 + 1e-3)
+    np.testing.assert_allclose(np.diag(fusion.p[rates, BIAS:BIAS + 3]), -1e-3)
+    assert np.all(np.linalg.eigvalsh(fusion.p) > 0)

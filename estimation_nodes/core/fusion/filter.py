@@ -76,6 +76,18 @@ class Counts:
     smoothed: dict[str, int] = field(default_factory=dict)
     #: Late measurements older than the history holds: corrected at the filter's time.
     beyond_history: dict[str, int] = field(default_factory=dict)
+    #: Late measurements older than the last set_pose or pause: taken at its time.
+    before_floor: dict[str, int] = field(default_factory=dict)
+
+    def outcome(self, source: str, accepted: bool, before: bool | None) -> None:
+        """A measurement applied or rejected; ``before`` is what it was counted as the
+        last time it ran (None: the first), so a replay moves its count, not adds one."""
+        if before is accepted:
+            return
+        if before is not None:
+            table = self.applied if before else self.rejected
+            table[source] -= 1
+        self.add(self.applied if accepted else self.rejected, source)
 
     def add(self, table: dict[str, int], source: str) -> None:
         table[source] = table.get(source, 0) + 1
@@ -125,17 +137,21 @@ class FusionFilter:
         self._history_floor_ns = -1 << 62
         self._history = None if history_ns is None else CausalOrder(self, history_ns,
                                                                     MAX_EVENTS)
+        #: What each measurement in the history was last counted as (smoothing).
+        self._outcomes: dict[int, tuple[Measurement, bool]] = {}
 
     # --- the peer's FilterBase::processMeasurement --------------------------------------
 
     def process(self, measurement: Measurement) -> bool:
         """Predict to the measurement's time and correct; False when it was rejected."""
-        return self._process(measurement, count=True)[0]
+        accepted = self._process(measurement)[0]
+        self.counts.outcome(measurement.source, accepted, None)
+        return accepted
 
-    def _process(self, measurement: Measurement, count: bool) -> tuple[bool, bool]:
+    def _process(self, measurement: Measurement) -> tuple[bool, bool]:
         """(taken, whether the state changed: a rejected one may still have predicted)."""
         if not self.initialized:
-            self._initialize(measurement, count)
+            self._initialize(measurement)
             return True, True
         delta_ns = measurement.stamp_ns - self.last_time_ns
         if delta_ns > 0:
@@ -146,24 +162,25 @@ class FusionFilter:
             accepted = False
         else:
             accepted = True
-        if count:
-            self.counts.add(self.counts.applied if accepted else self.counts.rejected,
-                            measurement.source)
         if delta_ns >= 0:
             self.last_time_ns = measurement.stamp_ns
         return accepted, accepted or delta_ns > 0
 
-    def _initialize(self, measurement: Measurement, count: bool = True) -> None:
+    def _initialize(self, measurement: Measurement) -> None:
         idx = list(measurement.indices)
         # New arrays: a saved state (smooth_lagged_data) holds the old ones. R with its
         # variances floored, as a correction would take it: the peer copies the
         # message's, so a negative variance there would make P indefinite.
         self.x, self.p = self.x.copy(), self.p.copy()
         self.x[idx], self.p[np.ix_(idx, idx)] = steps.subset(measurement)
+        # A gyro's reading is the rate plus its bias: the rate is the reading less the
+        # bias's estimate, as uncertain as both, and tied to the bias.
+        for measured, bias in measurement.biased:
+            self.x[measured] -= self.x[bias]
+            self.p[measured, measured] += self.p[bias, bias]
+            self.p[measured, bias] = self.p[bias, measured] = -self.p[bias, bias]
         self.initialized = True
         self.last_time_ns = measurement.stamp_ns
-        if count:
-            self.counts.add(self.counts.applied, measurement.source)
 
     def set_pose(self, measurement: Measurement, now_ns: int) -> None:
         """The peer's ``set_pose``: the state is the measurement's values (0 where it has
@@ -178,9 +195,11 @@ class FusionFilter:
         self.x, self.p = x, p
         idx = list(measurement.indices)
         self.x[idx], self.p[np.ix_(idx, idx)] = steps.subset(measurement)
+        self._points = None   # the UKF's next correction draws them around the pose
         self._queue.clear()
         if self._history is not None:
             self._history.clear()   # nothing goes back before the pose it was put at
+            self._outcomes.clear()
         self._history_floor_ns = now_ns
         self.last_time_ns = now_ns
         self.counts.add(self.counts.applied, measurement.source)
@@ -256,10 +275,22 @@ class FusionFilter:
         before_floor = stamp_ns < self._history_floor_ns
         submission = self._history.submit(max(stamp_ns, self._history_floor_ns),
                                           RANK_MEASUREMENT, measurement)
-        if submission.too_late or before_floor:
+        if before_floor:
+            self.counts.add(self.counts.before_floor, measurement.source)
+        elif submission.too_late:
             self.counts.add(self.counts.beyond_history, measurement.source)
         elif late:
             self.counts.add(self.counts.smoothed, measurement.source)
+        self._forget_outcomes()
+
+    def _forget_outcomes(self) -> None:
+        """Forget what the measurements the history no longer holds were counted as."""
+        if len(self._outcomes) <= 2 * MAX_EVENTS:
+            return
+        assert self.settings.history_ns is not None
+        oldest = self.last_time_ns - self.settings.history_ns
+        self._outcomes = {key: value for key, value in self._outcomes.items()
+                          if value[0].stamp_ns >= oldest}
 
     def _predict_to(self, now_ns: int) -> None:
         self.predict(now_ns - self.last_time_ns)
@@ -291,7 +322,13 @@ class FusionFilter:
     def apply(self, event, first_time: bool) -> bool:
         """One event in its place; False when it left the state as it was."""
         if isinstance(event, Measurement):
-            return self._process(event, count=first_time)[1]
+            accepted, changed = self._process(event)
+            # Counted once: a replay that takes what was rejected (or the reverse) moves
+            # its count. Keyed by the object, kept with it so the key stays its own.
+            before = None if first_time else self._outcomes.get(id(event), (event, None))[1]
+            self.counts.outcome(event.source, accepted, before)
+            self._outcomes[id(event)] = (event, accepted)
+            return changed
         if isinstance(event, PredictTo):
             if not self.initialized or event.stamp_ns <= self.last_time_ns:
                 return False
@@ -311,6 +348,7 @@ class FusionFilter:
             self.last_time_ns = now_ns
             if self._history is not None:
                 self._history.clear()   # the state before the pause is not to be rebuilt
+                self._outcomes.clear()
                 self._history_floor_ns = now_ns
         return dropped
 
