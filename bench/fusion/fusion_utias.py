@@ -286,6 +286,7 @@ def main() -> None:
                      str(result.outputs), f"{100 * result.share:.1f}%",
                      " / ".join(f"{100 * share:.0f}%" for share in result.thirds),
                      f"{result.final_error:.2f}", f"{result.final_spread:.2f}"])
+    rows += pooled_rows(results, args.fit_robot)
     print("ekf_node's filter on the commands alone (two_d_mode, twist at ~65 Hz, outputs at "
           f"{FREQUENCY:g} Hz): truth (x, y) within the 95% ellipse (d^2 <= {ELLIPSE_95})")
     print(table(["robot", "noise figures", "outputs", "in the 95% ellipse",
@@ -300,6 +301,21 @@ def main() -> None:
                   f"{drift.total_rate:.4f}"] for robot, drift in drifts]))
     if args.model_runs:
         print_own_model_shares(args.dataset, figures, results, args.model_runs)
+
+
+def pooled_rows(results: dict[int, Consistency], fitted: int) -> list[list[str]]:
+    """The share over every robot's outputs together, and over the validation robots'."""
+    groups = [("all", list(results)),
+              ("validation", [robot for robot in results if robot != fitted])]
+    rows = []
+    for name, robots in groups:
+        if len(robots) < 2:
+            continue
+        outputs = sum(results[robot].outputs for robot in robots)
+        held = sum(results[robot].share * results[robot].outputs for robot in robots)
+        rows.append([f"{name} ({', '.join(map(str, robots))})", "pooled", str(outputs),
+                     f"{100 * held / outputs:.1f}%", "", "", ""])
+    return rows
 
 
 def print_own_model_shares(dataset: Path, figures: NoiseFigures,
