@@ -32,7 +32,7 @@ from estimation_nodes.core.fusion import steps
 from estimation_nodes.core.fusion.control import Control, ControlSettings
 from estimation_nodes.core.fusion.lagged import (MAX_EVENTS, RANK_COMMAND, RANK_MEASUREMENT,
                                                  RANK_PREDICTION, Command, PredictTo,
-                                                 Snapshot)
+                                                 Snapshot, Taken)
 from estimation_nodes.core.fusion.state import STATE_SIZE, TWIST, VROLL
 from estimation_nodes.core.fusion.steps import Measurement, Rejected, UnscentedWeights
 from estimation_nodes.core.validation import FloatArray
@@ -137,8 +137,6 @@ class FusionFilter:
         self._history_floor_ns = -1 << 62
         self._history = None if history_ns is None else CausalOrder(self, history_ns,
                                                                     MAX_EVENTS)
-        #: What each measurement in the history was last counted as (smoothing).
-        self._outcomes: dict[int, tuple[Measurement, bool]] = {}
 
     # --- the peer's FilterBase::processMeasurement --------------------------------------
 
@@ -199,7 +197,6 @@ class FusionFilter:
         self._queue.clear()
         if self._history is not None:
             self._history.clear()   # nothing goes back before the pose it was put at
-            self._outcomes.clear()
         self._history_floor_ns = now_ns
         self.last_time_ns = now_ns
         self.counts.add(self.counts.applied, measurement.source)
@@ -274,23 +271,13 @@ class FusionFilter:
         # Nothing goes back before a set pose (or a pause): an older one is taken then.
         before_floor = stamp_ns < self._history_floor_ns
         submission = self._history.submit(max(stamp_ns, self._history_floor_ns),
-                                          RANK_MEASUREMENT, measurement)
+                                          RANK_MEASUREMENT, Taken(measurement))
         if before_floor:
             self.counts.add(self.counts.before_floor, measurement.source)
         elif submission.too_late:
             self.counts.add(self.counts.beyond_history, measurement.source)
         elif late:
             self.counts.add(self.counts.smoothed, measurement.source)
-        self._forget_outcomes()
-
-    def _forget_outcomes(self) -> None:
-        """Forget what the measurements the history no longer holds were counted as."""
-        if len(self._outcomes) <= 2 * MAX_EVENTS:
-            return
-        assert self.settings.history_ns is not None
-        oldest = self.last_time_ns - self.settings.history_ns
-        self._outcomes = {key: value for key, value in self._outcomes.items()
-                          if value[0].stamp_ns >= oldest}
 
     def _predict_to(self, now_ns: int) -> None:
         self.predict(now_ns - self.last_time_ns)
@@ -321,13 +308,12 @@ class FusionFilter:
 
     def apply(self, event, first_time: bool) -> bool:
         """One event in its place; False when it left the state as it was."""
-        if isinstance(event, Measurement):
-            accepted, changed = self._process(event)
+        if isinstance(event, Taken):
+            accepted, changed = self._process(event.measurement)
             # Counted once: a replay that takes what was rejected (or the reverse) moves
-            # its count. Keyed by the object, kept with it so the key stays its own.
-            before = None if first_time else self._outcomes.get(id(event), (event, None))[1]
-            self.counts.outcome(event.source, accepted, before)
-            self._outcomes[id(event)] = (event, accepted)
+            # its count.
+            self.counts.outcome(event.measurement.source, accepted, event.accepted)
+            event.accepted = accepted
             return changed
         if isinstance(event, PredictTo):
             if not self.initialized or event.stamp_ns <= self.last_time_ns:
@@ -348,7 +334,6 @@ class FusionFilter:
             self.last_time_ns = now_ns
             if self._history is not None:
                 self._history.clear()   # the state before the pause is not to be rebuilt
-                self._outcomes.clear()
                 self._history_floor_ns = now_ns
         return dropped
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from estimation_nodes.core.fusion.steps import Measurement
 from estimation_nodes.core.validation import FloatArray
 
 #: Events at one instant: a command first (it moves what follows), then the
@@ -35,6 +36,16 @@ RANK_COMMAND, RANK_MEASUREMENT, RANK_PREDICTION = 0, 1, 2
 #: The most events the history keeps, whatever ``history_length`` says: some 2 kB each
 #: (the state before it), so 20 MB at most; 10,000 is 20 s of an IMU at 500 Hz.
 MAX_EVENTS = 10_000
+
+
+@dataclass
+class Taken:
+    """A measurement as an event, with what it was counted as the last time it ran
+    (None before the first): a replay that takes one rejected before, or the reverse,
+    moves its count rather than adding one."""
+
+    measurement: Measurement
+    accepted: bool | None = None
 
 
 @dataclass(frozen=True)
