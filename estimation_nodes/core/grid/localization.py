@@ -239,12 +239,18 @@ class GridLocalization:
         dropped += float(kept[small].sum())
         ks, rs, cs, kept = ks[~small], rs[~small], cs[~small], kept[~small]
         remaining = sum(float(part.sum()) for part in parts) + float(kept.sum())
-        for r0, r1, c0, c1 in self._boxes:
-            self.belief[:, r0:r1, c0:c1] = 0.0
+        # The new windows written in place (no temporary of their size: a global start's
+        # is the building's), then what the old ones held outside them zeroed.
+        covered = np.zeros(self.model.free.shape, dtype=bool)
         footprint = np.zeros(self.model.free.shape, dtype=bool)
         for part, (r0, r1, c0, c1) in zip(parts, correction.boxes):
-            self.belief[:, r0:r1, c0:c1] = part / remaining
+            np.divide(part, remaining, out=self.belief[:, r0:r1, c0:c1])
+            covered[r0:r1, c0:c1] = True
             footprint[r0:r1, c0:c1] = part.any(axis=0)
+        for r0, r1, c0, c1 in self._boxes:
+            stale = ~covered[r0:r1, c0:c1]
+            if stale.any():
+                self.belief[:, r0:r1, c0:c1][:, stale] = 0.0
         self.belief[ks, rs, cs] = kept / remaining
         footprint[rs, cs] = True
         self._boxes = window.support_boxes(footprint)
