@@ -2,7 +2,7 @@
 
     python bench/grid/real_log_node.py [--log intel|aces|PATH] [--scan-rate 10]
         [--resolution 0.1] [--heading-bins 72] [--max-odom-jump 5] [--seconds S]
-        [--picture FILE.png] [--keep DIR] [--record FILE.mcap] [--tf]
+        [--picture FILE.png] [--keep DIR] [--record FILE.mcap] [--tf] [--global-start]
 
 What a user does with a CARMEN log, through the real executables: ``estimation_import
 carmen`` makes a recording, ``estimation_map`` a map from its corrected poses (0.05 m),
@@ -15,7 +15,9 @@ on ``initialpose``, 0.3 m and 10 degrees), and ``estimation_play`` plays the rec
 Printed: the scans played and their rate, what the node did with them from its
 /diagnostics (updated, not due for lack of motion, missed, rejected), its update time
 (median and maximum, its own measure), its peak resident memory (VmHWM), and the
-published poses against the corrected pose of their scan (paired by stamp).
+published poses against the corrected pose of their scan (paired by stamp). With
+``--global-start`` the localizer is given no pose and starts uniform over the free cells;
+its longest update is then the first.
 
 With ``--tf`` the run is a robot's as nav2_amcl sees it: the log imported with its tf tree
 and the laser mounted ``TF_LASER_AHEAD`` m forward (``--laser-ahead``: base_link, its
@@ -247,6 +249,13 @@ class Watcher:
         self.give_initial_pose(pose)
         self.spin(lambda: len(self.poses) > count, 30)
 
+    def start_localizer_anywhere(self, localizer, log_path: Path, bench: str) -> None:
+        """Once the localizer is ready and publishing, give it no pose: it starts from
+        the uniform belief over the free cells (a global start)."""
+        if not wait_for_line(localizer, log_path, "ready:", 300):
+            sys.exit(f"{bench}: the localizer never said ready:\n" + log_path.read_text())
+        self.spin(lambda: self.initial.get_subscription_count() > 0 and self.poses, 60)
+
 
 @dataclass
 class Played:
@@ -306,8 +315,13 @@ def play(args: argparse.Namespace, log_path: Path, work: Path,
     try:
         if args.tf:
             watcher.activate("grid_localizer")
-        watcher.start_localizer_at(localizer, work / "localizer.log",
-                                   behind(log.scans[0].pose, laser_ahead), "real_log_node")
+        if getattr(args, "global_start", False):
+            watcher.start_localizer_anywhere(localizer, work / "localizer.log",
+                                             "real_log_node")
+        else:
+            watcher.start_localizer_at(localizer, work / "localizer.log",
+                                       behind(log.scans[0].pose, laser_ahead),
+                                       "real_log_node")
         inputs = ["/scan", "/tf", "/tf_static", "--clock"] if args.tf else ["/scan", "/odom"]
         play_command = [executable("estimation_play"), str(recording), "--rate", f"{rate:g}",
                         "--topics", *inputs, "--wait-for-subscribers", "30", "--delay", "2"]
@@ -457,6 +471,9 @@ def main() -> None:
                              "keep them (default: a temporary folder)")
     parser.add_argument("--record", type=Path, metavar="FILE.mcap",
                         help="record the run and check it with estimation_replay")
+    parser.add_argument("--global-start", action="store_true",
+                        help="give the localizer no initial pose: it starts uniform over "
+                             "the free cells (its longest update is then the first)")
     parser.add_argument("--tf", action="store_true",
                         help="as a robot with nav2_amcl: odometry and mount from tf, played "
                              "with --clock, the lifecycle driven, map -> base_link scored")
