@@ -311,3 +311,33 @@ def test_more_groups_than_max_windows_are_joined_with_their_nearest_not_into_one
     few = np.zeros_like(footprint)
     few[10, 10:10 + 10 * window.MAX_WINDOWS:10] = True
     assert len(window.support_boxes(few)) == window.MAX_WINDOWS
+
+
+def test_the_prior_written_in_its_box_is_the_whole_one_above_the_cut():
+    """priors.gaussian_prior_in_place: the states at or above the cut as gaussian_prior's
+    (to rounding: its sum runs in another order), none written outside its box, and what
+    it left out is the probability of the states below the cut."""
+    from estimation_nodes.core.grid.priors import gaussian_prior_in_place
+
+    model = room(200, 150, bins=16)
+    covariance = np.diag([0.3, 0.2, 0.1])
+    whole = gaussian_prior(model, 6.0, 9.0, 0.4, covariance)
+    out = np.full(model.shape, np.nan)
+    out[:, 20:60, 30:70] = 0.5                     # an old belief held in one box
+    cut = 1e-9
+    out, left_out = gaussian_prior_in_place(model, 6.0, 9.0, 0.4, covariance, out,
+                                            [(20, 60, 30, 70)], cut)
+    written = ~np.isnan(out)
+    above = whole >= cut * whole.max()
+    assert np.all(written[above])
+    np.testing.assert_allclose(out[written], np.where(above, whole, out)[written], rtol=1e-12)
+    assert np.all(out[written & ~above] < cut)
+    assert not np.all(written)                     # the rest of the building untouched
+    assert np.all(out[:, 20:60, 30:70]  # the old box zeroed where the prior does not reach
+                  <= np.maximum(whole[:, 20:60, 30:70], cut) * (1 + 1e-12))
+    # Into an array with nothing held: what is left out is what lies outside its box.
+    fresh = np.full(model.shape, np.nan)
+    fresh, left_out = gaussian_prior_in_place(model, 6.0, 9.0, 0.4, covariance, fresh, [],
+                                              cut)
+    assert left_out == pytest.approx(float(whole[np.isnan(fresh)].sum()), rel=1e-9)
+    assert 0.0 < left_out < cut * whole.size

@@ -84,7 +84,8 @@ from estimation_nodes.core.grid.motion import (
     _spread,
     odometry_delta,
 )
-from estimation_nodes.core.grid.priors import gaussian_prior, uniform_over_free
+from estimation_nodes.core.grid.priors import (gaussian_prior, gaussian_prior_in_place,
+                                               resident_where_written, uniform_over_free)
 from estimation_nodes.core.validation import (
     FloatArray,
     check_integer,
@@ -167,7 +168,11 @@ class GridLocalization:
         self._astray_probability = odometry_failure_probability
         self._floor = belief_floor
         self._free_states = int(model.free.sum()) * model.heading_bins
-        self.belief: FloatArray = uniform_over_free(model)
+        # Uniform until a prior is given, written when first read: a belief given its
+        # initial pose before then is never written over the whole building (hundreds of
+        # MB, resident only where written: priors.resident_where_written).
+        self._belief: FloatArray = resident_where_written(model.shape)
+        self._uniform_unwritten = True
         #: Disjoint boxes holding every state with probability (the whole grid with
         #: belief_floor 0): the windows the steps run over.
         self._boxes: list[window.Box] = [window.full_box(model)]
@@ -195,6 +200,19 @@ class GridLocalization:
         #: refines the pose with; None before the first and after a new prior.
         self._last_scan: tuple[FloatArray, FloatArray] | None = None
 
+    @property
+    def belief(self) -> FloatArray:
+        """The belief over the grid's states (heading, row, column)."""
+        if self._uniform_unwritten:
+            self._uniform_unwritten = False
+            uniform_over_free(self.model, out=self._belief)
+        return self._belief
+
+    @belief.setter
+    def belief(self, belief: FloatArray) -> None:
+        self._uniform_unwritten = False
+        self._belief = belief
+
     def global_localization(self) -> None:
         """Not knowing where the robot is: uniform over the free cells."""
         self._hold(uniform_over_free(self.model, out=self.belief))
@@ -206,9 +224,17 @@ class GridLocalization:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
         x, y, yaw = check_pose("pose", pose)
         # Written over the belief (a building's is hundreds of MB): the prior refused, the
-        # belief is as it was.
-        prior = gaussian_prior(self.model, x, y, yaw, covariance, out=self.belief)
+        # belief is as it was. With a floor, only within the prior's box and the old
+        # belief's windows (the rest is zero and stays unwritten).
+        left_out = 0.0
+        if self._floor > 0.0:
+            held = [] if self._uniform_unwritten else self._boxes
+            prior, left_out = gaussian_prior_in_place(
+                self.model, x, y, yaw, covariance, self._belief, held, self._floor)
+        else:
+            prior = gaussian_prior(self.model, x, y, yaw, covariance, out=self.belief)
         self._hold(prior)
+        self.last_dropped += left_out
         self._forget_doubt()
         self._started = "the initial pose"
 

@@ -41,6 +41,86 @@ def _belief_array(model: GridModel, out: FloatArray | None) -> FloatArray:
     return out
 
 
+def resident_where_written(shape: tuple[int, ...]) -> FloatArray:
+    """A zero array whose memory pages become resident only where they are written: numpy
+    asks the kernel for huge pages (2 MB) for a large array, and then a window written in
+    every heading layer makes each layer's huge page resident, the whole building's
+    belief in effect. (numpy's switch is private: where it is missing, a plain array.)"""
+    multiarray: Any = getattr(getattr(np, "_core", None), "multiarray", None)
+    if not hasattr(multiarray, "_set_madvise_hugepage"):
+        return np.zeros(shape)
+    asked = multiarray._get_madvise_hugepage()
+    multiarray._set_madvise_hugepage(False)
+    try:
+        return np.zeros(shape)
+    finally:
+        multiarray._set_madvise_hugepage(asked)
+
+
+def gaussian_prior_in_place(model: GridModel, x: float, y: float, yaw: float,
+                            covariance: FloatArray, out: FloatArray,
+                            held: list[tuple[int, int, int, int]], cut: float
+                            ) -> tuple[FloatArray, float]:
+    """``gaussian_prior`` written into ``out`` only within the box of the states whose
+    unnormalized value (1 at the most likely state) is at least ``cut``, after zeroing
+    ``held`` (the boxes holding ``out``'s nonzero states): the rest of ``out``, zero
+    already, is not written, so its memory need not become resident
+    (``resident_where_written``). Normalized over every state, as ``gaussian_prior``;
+    returned with the probability of the states left out, each of which is below ``cut``
+    (a floor of that size would drop them). Refused as ``gaussian_prior`` is, ``out`` then
+    untouched."""
+    _check_model(model)
+    x, y, yaw = check_pose("pose", (x, y, yaw))
+    information = _information(model, covariance)
+    lowest = _lowest_exponent(model, (x, y, yaw), information)
+    near = np.zeros(model.free.shape, dtype=bool)
+    total = 0.0
+    for layer in _prior_layers(model, (x, y, yaw), information):
+        value = np.exp(-0.5 * (layer - lowest), where=model.free, out=np.zeros_like(layer))
+        total += float(value.sum())
+        near |= value >= cut
+    rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
+    r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
+    for b0, b1, d0, d1 in held:
+        out[:, b0:b1, d0:d1] = 0.0
+    exponent = out[:, r0:r1, c0:c1]
+    for k, layer in enumerate(_prior_layers(model, (x, y, yaw), information)):
+        exponent[k] = layer[r0:r1, c0:c1]
+    exponent[:, ~model.free[r0:r1, c0:c1]] = np.inf
+    exponent -= lowest
+    exponent *= -0.5
+    np.exp(exponent, out=exponent)
+    written = float(exponent.sum())
+    exponent /= total
+    return out, max(0.0, (total - written) / total)
+
+
+def _information(model: GridModel, covariance: FloatArray) -> FloatArray:
+    """The Gaussian's information matrix, the grid's own spread (half a cell, half a
+    heading bin) added to its covariance."""
+    cov = _covariance_3x3(covariance)
+    floor = np.diag([(model.resolution / 2) ** 2] * 2 + [(model.bin_width / 2) ** 2])
+    try:
+        information = np.asarray(np.linalg.inv(cov + floor), dtype=np.float64)
+    except np.linalg.LinAlgError:
+        raise InvalidInputError(f"covariance: singular to rounding once the grid's own "
+                                f"spread is added: {short(cov)}") from None
+    return information
+
+
+def _lowest_exponent(model: GridModel, pose: tuple[float, float, float],
+                     information: FloatArray) -> float:
+    """The lowest exponent over the free states, a layer at a time; a pose too far from
+    the map for a finite prior refused (``NonFiniteResultError``)."""
+    lowest = min(float(np.min(layer, where=model.free, initial=np.inf))
+                 for layer in _prior_layers(model, pose, information))
+    if not math.isfinite(lowest):   # NaN or inf anywhere: min is NaN, or inf everywhere
+        raise NonFiniteResultError(f"x, y, covariance: the pose ({pose[0]:g}, {pose[1]:g}) "
+                                   f"is too far from the map (or the covariance too "
+                                   f"extreme) for a finite prior")
+    return lowest
+
+
 def gaussian_prior(model: GridModel, x: float, y: float, yaw: float,
                    covariance: FloatArray, out: FloatArray | None = None) -> FloatArray:
     """A prior from a pose and its 3 x 3 covariance over (x, y, yaw), as RViz's "2D Pose
@@ -50,21 +130,9 @@ def gaussian_prior(model: GridModel, x: float, y: float, yaw: float,
     ``out`` (as ``uniform_over_free``'s) then untouched."""
     _check_model(model)
     x, y, yaw = check_pose("pose", (x, y, yaw))
-    cov = _covariance_3x3(covariance)
-    floor = np.diag([(model.resolution / 2) ** 2] * 2 + [(model.bin_width / 2) ** 2])
-    try:
-        information = np.linalg.inv(cov + floor)
-    except np.linalg.LinAlgError:
-        raise InvalidInputError(f"covariance: singular to rounding once the grid's own "
-                                f"spread is added: {short(cov)}") from None
-    # The lowest exponent over the free states first, a layer at a time: a refused prior
-    # writes nothing.
-    lowest = min(float(np.min(layer, where=model.free, initial=np.inf))
-                 for layer in _prior_layers(model, (x, y, yaw), information))
-    if not math.isfinite(lowest):   # NaN or inf anywhere: min is NaN, or inf everywhere
-        raise NonFiniteResultError(f"x, y, covariance: the pose ({x:g}, {y:g}) is too far "
-                                   f"from the map (or the covariance too extreme) for a "
-                                   f"finite prior")
+    information = _information(model, covariance)
+    # The lowest exponent over the free states first: a refused prior writes nothing.
+    lowest = _lowest_exponent(model, (x, y, yaw), information)
     exponent = _belief_array(model, out)
     for k, layer in enumerate(_prior_layers(model, (x, y, yaw), information)):
         exponent[k] = layer

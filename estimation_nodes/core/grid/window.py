@@ -188,7 +188,8 @@ def drop_below(belief: FloatArray, floor: float) -> tuple[FloatArray, float]:
         return belief, 0.0
     dropped = zero_below(belief, min(floor, float(belief.max())))
     if dropped > 0.0:
-        belief /= float(belief.sum())
+        # Only the states left are written: a zero's memory page need not become resident.
+        np.divide(belief, float(belief.sum()), out=belief, where=belief != 0.0)
     return belief, dropped
 
 
@@ -197,6 +198,7 @@ def zero_below(belief: FloatArray, threshold: float) -> float:
     small = belief < threshold
     # Summed where small, not as belief[small]: that copy is most of a building's belief.
     dropped = float(np.sum(belief, where=small))
+    small &= belief != 0.0    # zeros left unwritten: their memory need not become resident
     belief[small] = 0.0
     return dropped
 
