@@ -24,7 +24,8 @@ command on ``cmd_vel`` (geometry_msgs/Twist, taken at its arrival; TwistStamped 
 publishes ``/diagnostics`` every second: per input part the measurements applied, rejected
 by the Mahalanobis threshold and dropped, by reason. A clock that jumps back (a bag played
 again) resets the filter, as the peer does. A message with a non-finite value in what it
-feeds is dropped and counted, so nothing NaN is ever published.
+feeds is dropped and counted, so nothing NaN is ever published; a state that is not
+finite or holds a negative variance is reset, not published.
 """
 
 from __future__ import annotations
@@ -277,8 +278,9 @@ class FusionNode(Node):
                 self._inputs.drop(f"{measurement.source}: processing toggled off")
         if not self._fusion.initialized or self._fusion.last_time_ns <= self._last_published_ns:
             return
-        if not (np.all(np.isfinite(self._fusion.x)) and np.all(np.isfinite(self._fusion.p))):
-            self.get_logger().error("the filter's state is not finite: resetting it")
+        problem = state_problem(self._fusion.x, self._fusion.p)
+        if problem:
+            self.get_logger().error(f"the filter's state {problem}: resetting it")
             self._fusion.reset()
             return
         self._last_published_ns = self._fusion.last_time_ns
@@ -326,6 +328,17 @@ class FusionNode(Node):
         msg.pose.covariance = [float(v) for v in p[:6, :6].ravel()]
         msg.twist.covariance = [float(v) for v in p[6:12, 6:12].ravel()]
         return msg
+
+
+def state_problem(x: np.ndarray, p: np.ndarray) -> str | None:
+    """Why the state cannot be published, None when it can: a number not finite, or a
+    negative variance (the UKF's covariance can lose its positive definiteness when an
+    angle goes unobserved for long, with the default alpha's weight of about -1e6)."""
+    if not (np.all(np.isfinite(x)) and np.all(np.isfinite(p))):
+        return "is not finite"
+    if np.any(np.diag(p) < 0.0):
+        return "has a negative variance"
+    return None
 
 
 def measurement_counts(fusion: FusionFilter, inputs: SensorInputs) -> dict[str, int]:

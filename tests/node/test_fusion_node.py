@@ -346,3 +346,21 @@ def test_the_peers_services_set_pose_reset_and_toggle(fusion_node, make_node, ex
     assert not node._fusion.initialized and node.resets == 1
     # /diagnostics counts since the start: a reset forgets the inputs' messages, not them.
     assert node._inputs.dropped["odom0_twist: processing toggled off"] == 1
+
+
+def test_a_state_with_a_negative_variance_is_reset_not_published(fusion_node,
+                                                                  collector_factory, executor):
+    """A covariance that is no longer one (the UKF's, with an angle unobserved for long)
+    is never published: the filter starts over, as for a state that is not finite. (The
+    EKF's prediction keeps the broken entry negative; the UKF's could mend it first.)"""
+    node = fusion_node("ekf")
+    collector = collector_factory({"odometry/filtered": (Odometry, QoSProfile(depth=100))})
+    t0 = node.get_clock().now().nanoseconds
+    node._sensor_subscriptions[0].callback(odom(t0, 1.0, 0.0))
+    assert spin_until(executor, lambda: node._fusion.initialized, 10.0)
+    broken = node._fusion.p.copy()
+    broken[5, 5] = -1.0
+    node._fusion.p = broken
+    assert spin_until(executor, lambda: not node._fusion.initialized, 10.0)
+    for msg in collector.messages["odometry/filtered"]:
+        assert min(msg.pose.covariance[::7]) >= 0.0
