@@ -75,23 +75,18 @@ def gaussian_prior_in_place(model: GridModel, x: float, y: float, yaw: float,
     lowest = _lowest_exponent(model, (x, y, yaw), information)
     near = np.zeros(model.free.shape, dtype=bool)
     total = 0.0
-    for layer in _prior_layers(model, (x, y, yaw), information):
-        value = np.exp(-0.5 * (layer - lowest), where=model.free, out=np.zeros_like(layer))
-        total += float(value.sum())
-        near |= value >= cut
+    for values in _prior_values(model, (x, y, yaw), information, lowest):
+        total += float(values.sum())
+        near |= values >= cut
     rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
     for b0, b1, d0, d1 in held:
         out[:, b0:b1, d0:d1] = 0.0
-    exponent = out[:, r0:r1, c0:c1]
-    for k, layer in enumerate(_prior_layers(model, (x, y, yaw), information)):
-        exponent[k] = layer[r0:r1, c0:c1]
-    exponent[:, ~model.free[r0:r1, c0:c1]] = np.inf
-    exponent -= lowest
-    exponent *= -0.5
-    np.exp(exponent, out=exponent)
-    written = float(exponent.sum())
-    exponent /= total
+    part = out[:, r0:r1, c0:c1]
+    for k, values in enumerate(_prior_values(model, (x, y, yaw), information, lowest)):
+        part[k] = values[r0:r1, c0:c1]
+    written = float(part.sum())
+    part /= total
     return out, max(0.0, (total - written) / total)
 
 
@@ -133,19 +128,25 @@ def gaussian_prior(model: GridModel, x: float, y: float, yaw: float,
     information = _information(model, covariance)
     # The lowest exponent over the free states first: a refused prior writes nothing.
     lowest = _lowest_exponent(model, (x, y, yaw), information)
-    exponent = _belief_array(model, out)
-    for k, layer in enumerate(_prior_layers(model, (x, y, yaw), information)):
-        exponent[k] = layer
-    # Walls and unknown space out: inf there, exp() makes them 0.
-    exponent[:, ~model.free] = np.inf
-    # In place, one tensor: a real building's prior is hundreds of MB. The most likely
-    # free state gets exp(0) = 1, so the sum is never 0: where the Gaussian covers no free
-    # cell, the free states nearest in its metric take the mass.
-    exponent -= lowest
-    exponent *= -0.5
-    belief = np.exp(exponent, out=exponent)
+    # Written a layer at a time, no temporary of the belief's size: a real building's
+    # prior is hundreds of MB.
+    belief = _belief_array(model, out)
+    for k, values in enumerate(_prior_values(model, (x, y, yaw), information, lowest)):
+        belief[k] = values
     belief /= belief.sum()
     return belief
+
+
+def _prior_values(model: GridModel, pose: tuple[float, float, float],
+                  information: FloatArray, lowest: float) -> Iterator[FloatArray]:
+    """Each heading layer's prior before it is normalized: exp(-(d' I d - lowest) / 2) on
+    the free cells, 0 on walls and unknown space. The most likely free state gets exp(0)
+    = 1, so the sum is never 0: where the Gaussian covers no free cell, the free states
+    nearest in its metric take the mass."""
+    for layer in _prior_layers(model, pose, information):
+        layer -= lowest
+        layer *= -0.5
+        yield np.exp(layer, where=model.free, out=np.zeros_like(layer))
 
 
 def _prior_layers(model: GridModel, pose: tuple[float, float, float],
