@@ -99,13 +99,13 @@ class FusionFilter:
     def __init__(self, settings: FusionSettings) -> None:
         if settings.kind not in ("ekf", "ukf"):
             raise ValueError(f"filter kind must be 'ekf' or 'ukf', got {settings.kind!r}")
-        size = int(np.size(settings.initial_state))
+        self.settings = settings
+        size = self.size
         if np.shape(settings.process_noise) != (size, size) or \
                 np.shape(settings.initial_covariance) != (size, size) or \
                 settings.weights.size != size:
             raise ValueError(f"the process noise, the initial covariance and the unscented "
                              f"weights must all be for {size} entries, as the initial state")
-        self.settings = settings
         self.counts = Counts()
         self._arrivals = itertools.count()
         self.reset()
