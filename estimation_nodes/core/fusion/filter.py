@@ -195,9 +195,7 @@ class FusionFilter:
         self.x[idx], self.p[np.ix_(idx, idx)] = steps.subset(measurement)
         self._points = None   # the UKF's next correction draws them around the pose
         self._queue.clear()
-        if self._history is not None:
-            self._history.clear()   # nothing goes back before the pose it was put at
-        self._history_floor_ns = now_ns
+        self._forget_history(now_ns)   # nothing goes back before the pose it was put at
         self.last_time_ns = now_ns
         self.counts.add(self.counts.applied, measurement.source)
 
@@ -332,10 +330,15 @@ class FusionFilter:
         self._queue.clear()
         if self.initialized:
             self.last_time_ns = now_ns
-            if self._history is not None:
-                self._history.clear()   # the state before the pause is not to be rebuilt
-                self._history_floor_ns = now_ns
+            self._forget_history(now_ns)   # the state before the pause is not rebuilt
         return dropped
+
+    def _forget_history(self, now_ns: int) -> None:
+        """Nothing is put back before ``now_ns`` (a set pose, a pause): the history of
+        ``smooth_lagged_data`` starts again there."""
+        if self._history is not None:
+            self._history.clear()
+        self._history_floor_ns = now_ns
 
     def differentiate(self, now_ns: int) -> None:
         """The angular acceleration since the last periodic step (the peer's estimate)."""
