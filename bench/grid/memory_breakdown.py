@@ -4,12 +4,11 @@
 
 For each log, in a fresh process, the resident memory (from /proc/self/statm) and its
 peak after each stage of real_buildings.py's core run: the imports, the log read, the
-map made, the grid model, the localizer made (its dense belief: heading bins x rows x
-columns doubles, written over the whole grid), the initial pose, the compiled kernels
-loaded, and some updates. Beside it: the belief's size, the share of the grid's cells
-that are free (the states a belief could hold), and the share of the belief's memory
-pages that hold a free state (what a belief touching only the free states' pages would
-still keep resident). The baseline: a process that imports numpy alone, and one that
+map made, the grid model, the localizer made and its compiled kernels loaded, the
+initial pose, and some updates. Beside it: what a dense belief would take (heading bins
+x rows x columns doubles) against the most the localizer's windows held
+(core/grid/held.py), the share of the grid's cells that are free (the states a belief
+could hold), and the share of a dense belief's memory pages that hold a free state. The baseline: a process that imports numpy alone, and one that
 imports numba and compiles one function (what the compiled kernels cost before any of
 ours). Issue 36 asks the node for ACES <= 400 MB and Intel <= 300 MB.
 """
@@ -75,6 +74,7 @@ def stages(log_name: str, scans: int) -> dict:
     odometry = iter(log.odometry)
     pending = next(odometry, None)
     updates = 0
+    held = localization.held_bytes
     for scan in log.scans[:scans]:
         stamp = rb.ns(scan.t)
         while pending is not None and rb.ns(pending.t) <= stamp:
@@ -83,8 +83,10 @@ def stages(log_name: str, scans: int) -> dict:
         if localization.due(stamp):
             localization.update(*rb.scan_beams(scan.ranges, settings.max_beams), stamp)
             updates += 1
+        held = max(held, localization.held_bytes)
     figures.append((f"after {updates} updates", resident_mb(), peak_mb()))
-    return {"figures": figures, "belief_mb": localization.belief.nbytes / 2**20,
+    return {"figures": figures, "belief_mb": 8 * int(np.prod(model.shape)) / 2**20,
+            "held_mb": held / 2**20,
             "shape": list(model.shape), "free_share": float(model.free.mean()),
             "free_pages": free_state_pages(model.free, model.heading_bins)}
 
@@ -107,8 +109,9 @@ def main() -> None:
                                 "--scans", str(args.scans)], check=True,
                                capture_output=True, text=True)
         result = json.loads(child.stdout.strip().splitlines()[-1])
-        print(f"\n{name}: belief {' x '.join(map(str, result['shape']))} doubles, "
-              f"{result['belief_mb']:.0f} MB; free cells {100 * result['free_share']:.0f}%; "
+        print(f"\n{name}: a dense belief {' x '.join(map(str, result['shape']))} doubles, "
+              f"{result['belief_mb']:.0f} MB (the windows held: at most "
+              f"{result['held_mb']:.1f} MB); free cells {100 * result['free_share']:.0f}%; "
               f"pages holding a free state {100 * result['free_pages']:.0f}%")
         print(table(["stage", "resident MB", "peak MB"],
                     [[stage, f"{now:.0f}", f"{top:.0f}"]

@@ -51,9 +51,14 @@ def tracked_pair(model, floor, kidnap=0.0, compiled=True):
 
 
 def assert_the_same_filter(windowed, dense):
-    """Belief, evidence, estimate, entropy and belief map equal to rounding."""
+    """Belief and evidence equal to rounding, and what is said of them."""
     np.testing.assert_allclose(windowed.belief, dense.belief, rtol=0, atol=1e-12)
     assert windowed.log_evidence == pytest.approx(dense.log_evidence, abs=1e-9)
+    assert_the_same_figures(windowed, dense)
+
+
+def assert_the_same_figures(windowed, dense):
+    """Estimate, entropy and belief map equal to rounding."""
     a, b = dense.estimate(0.3, 0.2), windowed.estimate(0.3, 0.2)
     np.testing.assert_allclose(b.pose, a.pose, rtol=0, atol=1e-12)
     np.testing.assert_allclose(b.covariance, a.covariance, rtol=1e-9, atol=1e-12)
@@ -271,9 +276,10 @@ def test_two_far_modes_are_two_windows_and_the_filter_stays_the_dense_one():
             loc.on_odometry(odometry, (step + 1) * SECOND)
             loc.update(ranges, angles, (step + 1) * SECOND)
         assert_the_same_filter(windowed, dense)
-        assert len(windowed._boxes) == 2
-        rows = [r for box in windowed._boxes for r in box[:2]]
-        cols = [c for box in windowed._boxes for c in box[2:]]
+        boxes = windowed._windows.boxes
+        assert len(boxes) == 2
+        rows = [r for box in boxes for r in box[:2]]
+        cols = [c for box in boxes for c in box[2:]]
         both = (max(rows) - min(rows)) * (max(cols) - min(cols)) * model.heading_bins
         assert windowed.window_states < 0.5 * both
 
@@ -313,31 +319,23 @@ def test_more_groups_than_max_windows_are_joined_with_their_nearest_not_into_one
     assert len(window.support_boxes(few)) == window.MAX_WINDOWS
 
 
-def test_the_prior_written_in_its_box_is_the_whole_one_above_the_cut():
-    """priors.gaussian_prior_in_place: the states at or above the cut as gaussian_prior's
-    (to rounding: its sum runs in another order), none written outside its box, and what
-    it left out is the probability of the states below the cut."""
-    from estimation_nodes.core.grid.priors import gaussian_prior_in_place
+def test_the_prior_in_its_box_is_the_whole_one_above_the_cut():
+    """priors.gaussian_prior_window: every state at or above the cut is in its box, with
+    gaussian_prior's value (to rounding: its sum runs in another order), and what it
+    leaves out is the probability of the states outside the box, each below the cut."""
+    from estimation_nodes.core.grid.priors import gaussian_prior_window
 
     model = room(200, 150, bins=16)
     covariance = np.diag([0.3, 0.2, 0.1])
     whole = gaussian_prior(model, 6.0, 9.0, 0.4, covariance)
-    out = np.full(model.shape, np.nan)
-    out[:, 20:60, 30:70] = 0.5                     # an old belief held in one box
     cut = 1e-9
-    out, left_out = gaussian_prior_in_place(model, 6.0, 9.0, 0.4, covariance, out,
-                                            [(20, 60, 30, 70)], cut)
-    written = ~np.isnan(out)
-    above = whole >= cut * whole.max()
-    assert np.all(written[above])
-    np.testing.assert_allclose(out[written], np.where(above, whole, out)[written], rtol=1e-12)
-    assert np.all(out[written & ~above] < cut)
-    assert not np.all(written)                     # the rest of the building untouched
-    assert np.all(out[:, 20:60, 30:70]  # the old box zeroed where the prior does not reach
-                  <= np.maximum(whole[:, 20:60, 30:70], cut) * (1 + 1e-12))
-    # Into an array with nothing held: what is left out is what lies outside its box.
-    fresh = np.full(model.shape, np.nan)
-    fresh, left_out = gaussian_prior_in_place(model, 6.0, 9.0, 0.4, covariance, fresh, [],
-                                              cut)
-    assert left_out == pytest.approx(float(whole[np.isnan(fresh)].sum()), rel=1e-9)
+    (r0, r1, c0, c1), part, left_out = gaussian_prior_window(model, 6.0, 9.0, 0.4,
+                                                             covariance, cut)
+    inside = np.zeros(model.shape, dtype=bool)
+    inside[:, r0:r1, c0:c1] = True
+    assert np.all(inside[whole >= cut * whole.max()])
+    assert inside.sum() < 0.5 * inside.size             # not the building's box
+    np.testing.assert_allclose(part, whole[:, r0:r1, c0:c1], rtol=1e-12, atol=0)
+    assert np.all(whole[~inside] < cut * whole.max())
+    assert left_out == pytest.approx(float(whole[~inside].sum()), rel=1e-9)
     assert 0.0 < left_out < cut * whole.size

@@ -23,8 +23,12 @@ def most_likely_state(belief: FloatArray) -> tuple[int, int, int]:
 
 
 def _most_likely_state(belief: FloatArray) -> tuple[int, int, int]:
-    k, i, j = np.unravel_index(int(np.argmax(belief)), belief.shape)
-    return int(k), int(i), int(j)
+    """The first state of the largest probability (in (k, i, j) order, as np.argmax):
+    found a heading layer at a time, so that a belief whose layers are one array
+    repeated (a start's uniform belief, ``np.broadcast_to``) is never copied whole."""
+    k = int(np.argmax(belief.max(axis=(1, 2))))
+    i, j = np.unravel_index(int(np.argmax(belief[k])), belief.shape[1:])
+    return k, int(i), int(j)
 
 
 def pose_of(model: GridModel, state: tuple[int, int, int]) -> tuple[float, float, float]:
@@ -167,5 +171,11 @@ def entropy_bits(belief: FloatArray) -> float:
 
 
 def _entropy_bits(belief: FloatArray) -> float:
-    positive = belief[belief > 0]
-    return float(-(positive * np.log2(positive)).sum()) + 0.0
+    """Summed a heading layer at a time (as ``_most_likely_state``: the temporaries are a
+    layer's)."""
+    layers = belief.reshape(-1, *belief.shape[-2:]) if belief.ndim > 2 else belief[None]
+    total = 0.0
+    for layer in layers:
+        positive = layer[layer > 0]
+        total -= float((positive * np.log2(positive)).sum())
+    return total + 0.0

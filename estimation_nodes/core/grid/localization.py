@@ -64,6 +64,7 @@ from estimation_nodes.core.grid.belief import (
     _refined_pose,
 )
 from estimation_nodes.core.grid.correction import _correct_in
+from estimation_nodes.core.grid.held import HeldBelief
 from estimation_nodes.core.grid.laser import (
     _correct_scan,
     _scan_log_likelihood,
@@ -84,8 +85,8 @@ from estimation_nodes.core.grid.motion import (
     _spread,
     odometry_delta,
 )
-from estimation_nodes.core.grid.priors import (gaussian_prior, gaussian_prior_in_place,
-                                               resident_where_written, uniform_over_free)
+from estimation_nodes.core.grid.priors import (gaussian_prior, gaussian_prior_window,
+                                               uniform_over_free)
 from estimation_nodes.core.validation import (
     FloatArray,
     check_integer,
@@ -168,14 +169,11 @@ class GridLocalization:
         self._astray_probability = odometry_failure_probability
         self._floor = belief_floor
         self._free_states = int(model.free.sum()) * model.heading_bins
-        # Uniform until a prior is given, written when first read: a belief given its
-        # initial pose before then is never written over the whole building (hundreds of
-        # MB, resident only where written: priors.resident_where_written).
-        self._belief: FloatArray = resident_where_written(model.shape)
-        self._uniform_unwritten = True
-        #: Disjoint boxes holding every state with probability (the whole grid with
-        #: belief_floor 0): the windows the steps run over.
-        self._boxes: list[window.Box] = [window.full_box(model)]
+        #: The belief: its windows (disjoint boxes holding every state with probability,
+        #: the whole grid with belief_floor 0), the windows the steps run over. None:
+        #: uniform, made when first read, so that a belief given its initial pose before
+        #: then never holds the whole building (hundreds of MB).
+        self._held: HeldBelief | None = None
         self.log_evidence = float("nan")
         #: The probability belief_floor dropped at the last update.
         self.last_dropped = 0.0
@@ -202,20 +200,37 @@ class GridLocalization:
 
     @property
     def belief(self) -> FloatArray:
-        """The belief over the grid's states (heading, row, column)."""
-        if self._uniform_unwritten:
-            self._uniform_unwritten = False
-            uniform_over_free(self.model, out=self._belief)
-        return self._belief
+        """The belief over the grid's states (heading, row, column). With belief_floor a
+        new array the building's size, made from the windows held (for tests and tools:
+        the localizer itself reads its windows)."""
+        return self._windows.dense()
 
-    @belief.setter
-    def belief(self, belief: FloatArray) -> None:
-        self._uniform_unwritten = False
-        self._belief = belief
+    @property
+    def _windows(self) -> HeldBelief:
+        if self._held is None:
+            self._held = self._uniform()
+        return self._held
+
+    def _uniform(self) -> HeldBelief:
+        """Not knowing where the robot is (``uniform_over_free``): with belief_floor held
+        in the windows of the free cells, without a belief the building's size."""
+        model = self.model
+        if self._floor <= 0.0:
+            return HeldBelief.whole(uniform_over_free(model))
+        layer = model.free / float(np.count_nonzero(model.free) * model.heading_bins)
+        boxes = window.support_boxes(model.free)
+        # Every heading layer the same: held once, read through a view that repeats it
+        # (the building's size in memory only once a scan corrects it).
+        parts = [np.broadcast_to(layer[r0:r1, c0:c1].copy(),
+                                 (model.heading_bins, r1 - r0, c1 - c0))
+                 for r0, r1, c0, c1 in boxes]
+        return HeldBelief(model.shape, boxes, parts)
 
     def global_localization(self) -> None:
         """Not knowing where the robot is: uniform over the free cells."""
-        self._hold(uniform_over_free(self.model, out=self.belief))
+        self._held = self._uniform()
+        self.last_dropped = 0.0
+        self._last_scan = None
         self.log_evidence = float("nan")
         self._forget_doubt()
         self._started = UNIFORM
@@ -226,15 +241,17 @@ class GridLocalization:
         # Written over the belief (a building's is hundreds of MB): the prior refused, the
         # belief is as it was. With a floor, only within the prior's box and the old
         # belief's windows (the rest is zero and stays unwritten).
-        left_out = 0.0
         if self._floor > 0.0:
-            held = [] if self._uniform_unwritten else self._boxes
-            prior, left_out = gaussian_prior_in_place(
-                self.model, x, y, yaw, covariance, self._belief, held, self._floor)
+            box, part, left_out = gaussian_prior_window(self.model, x, y, yaw, covariance,
+                                                        self._floor)
+            part, dropped = window.drop_below(part, self._floor)
+            self._held = HeldBelief.within(self.model.shape, box, part)
+            self.last_dropped = dropped + left_out
+            self._last_scan = None
         else:
-            prior = gaussian_prior(self.model, x, y, yaw, covariance, out=self.belief)
-        self._hold(prior)
-        self.last_dropped += left_out
+            # Written over the belief held (a building's is hundreds of MB), if any.
+            held = None if self._held is None else self._held.dense()
+            self._hold(gaussian_prior(self.model, x, y, yaw, covariance, out=held))
         self._forget_doubt()
         self._started = "the initial pose"
 
@@ -247,11 +264,11 @@ class GridLocalization:
 
     def _hold(self, belief: FloatArray) -> None:
         """Take ``belief`` over the whole grid as the belief: with belief_floor > 0 without
-        its states below the floor, and their windows noted."""
-        self.belief, self.last_dropped = window.drop_below(belief, self._floor)
+        its states below the floor, held in the windows of the rest."""
+        belief, self.last_dropped = window.drop_below(belief, self._floor)
+        self._held = HeldBelief.windowed(belief) if self._floor > 0 \
+            else HeldBelief.whole(belief)
         self._last_scan = None
-        self._boxes = window.support_boxes(np.any(self.belief, axis=0)) \
-            if self._floor > 0 else [window.full_box(self.model)]
 
     def _hold_windows(self, correction: window.Correction) -> None:
         """Take a windowed correction's posterior as the belief, without its states below
@@ -265,21 +282,15 @@ class GridLocalization:
         dropped += float(kept[small].sum())
         ks, rs, cs, kept = ks[~small], rs[~small], cs[~small], kept[~small]
         remaining = sum(float(part.sum()) for part in parts) + float(kept.sum())
-        # The new windows written in place (no temporary of their size: a global start's
-        # is the building's), then what the old ones held outside them zeroed.
-        covered = np.zeros(self.model.free.shape, dtype=bool)
         footprint = np.zeros(self.model.free.shape, dtype=bool)
         for part, (r0, r1, c0, c1) in zip(parts, correction.boxes):
-            np.divide(part, remaining, out=self.belief[:, r0:r1, c0:c1])
-            covered[r0:r1, c0:c1] = True
+            part /= remaining
             footprint[r0:r1, c0:c1] = part.any(axis=0)
-        for r0, r1, c0, c1 in self._boxes:
-            stale = ~covered[r0:r1, c0:c1]
-            if stale.any():
-                self.belief[:, r0:r1, c0:c1][:, stale] = 0.0
-        self.belief[ks, rs, cs] = kept / remaining
         footprint[rs, cs] = True
-        self._boxes = window.support_boxes(footprint)
+        # The correction's windows are the grown ones: the new ones are its support's.
+        corrected = HeldBelief(self.model.shape, correction.boxes, parts)
+        self._held = corrected.regrouped(window.support_boxes(footprint),
+                                         (ks, rs, cs, kept / remaining))
         self.last_dropped = dropped + correction.left_out
 
     def on_odometry(self, pose: Pose, stamp_ns: int | None = None) -> OdometryStep:
@@ -434,8 +445,9 @@ class GridLocalization:
         """The steps over the windows: each grown by what the motion reaches (those that
         then overlap joined), predicted on its own and normalized together, then
         corrected together (window.correct_boxes)."""
-        boxes = self._boxes if delta is None else window.disjoint(
-            [window.grown_box(box, self.model, delta, self.noise) for box in self._boxes])
+        held = self._windows.boxes
+        boxes = held if delta is None else window.disjoint(
+            [window.grown_box(box, self.model, delta, self.noise) for box in held])
         if delta is None:
             priors = [self._window(box)[1] for box in boxes]
         else:
@@ -452,15 +464,19 @@ class GridLocalization:
     @property
     def window_states(self) -> int:
         """The states the next update starts from: its windows', all headings."""
-        return sum((r1 - r0) * (c1 - c0) for r0, r1, c0, c1 in self._boxes) \
-            * self.model.heading_bins
+        return self._windows.states
+
+    @property
+    def held_bytes(self) -> int:
+        """The memory the belief holds: its windows' (with belief_floor a tracked robot's
+        few square metres, not the building)."""
+        return self._windows.nbytes
 
     def _window(self, box: window.Box) -> tuple[GridModel, FloatArray]:
-        """The map and the belief within ``box`` (the belief a copy: the steps may write
-        over it, and a failed step must leave the belief as it was)."""
-        if box == window.full_box(self.model):
-            return self.model, self.belief
-        return window.crop(self.model, box), window.window_of(self.belief, box)
+        """The map and the belief within ``box`` (the belief held where ``box`` is one of
+        its windows: the steps only read it)."""
+        model = self.model if box == window.full_box(self.model) else window.crop(self.model, box)
+        return model, self._windows.within_box(box)
 
     def estimate(self, radius: float, angle: float) -> Estimate:
         """The most likely pose (belief.refined_pose of the most likely state), the
@@ -470,7 +486,7 @@ class GridLocalization:
         mixture's with the robot anywhere."""
         radius, angle = check_non_negative("radius", radius), check_non_negative("angle", angle)
         model = self.model
-        windows = [(box, window.window_of(self.belief, box)) for box in self._boxes]
+        windows = list(self._windows.windows())
         box, belief = max(windows, key=lambda pair: float(pair[1].max()))
         pose = _refined_pose(belief, model, _most_likely_state(belief), box)
         estimate = self._around(windows, box, belief, pose, radius, angle)
@@ -516,7 +532,7 @@ class GridLocalization:
 
     def _most_likely_pose(self) -> Pose:
         """The belief's mean around its most likely state (the pose ``estimate`` refines)."""
-        windows = [(box, self.belief[:, box[0]:box[1], box[2]:box[3]]) for box in self._boxes]
+        windows = self._windows.windows()
         box, belief = max(windows, key=lambda pair: float(pair[1].max()))
         return _refined_pose(belief, self.model, _most_likely_state(belief), box)
 
@@ -549,19 +565,22 @@ class GridLocalization:
         particle filter."""
         count = check_integer("count", count)
         found: list[tuple[float, Pose]] = []
-        for box in self._boxes:
-            part = window.window_of(self.belief, box)
-            flat = part.ravel()
-            n = min(count, flat.size)
-            for index in np.argpartition(flat, flat.size - n)[flat.size - n:]:
-                if flat[index] > 0.0:
-                    k, i, j = (int(v) for v in np.unravel_index(index, part.shape))
-                    found.append((float(flat[index]), _pose_of(self.model, (k, i, j), box)))
+        for box, part in self._windows.windows():
+            # A heading layer at a time: a start's uniform belief repeats one layer
+            # (``_uniform``), which a flat view of the whole would copy.
+            for k, layer in enumerate(part):
+                flat = layer.reshape(-1)
+                n = min(count, flat.size)
+                for index in np.argpartition(flat, flat.size - n)[flat.size - n:]:
+                    if flat[index] > 0.0:
+                        i, j = (int(v) for v in np.unravel_index(index, layer.shape))
+                        found.append((float(flat[index]),
+                                      _pose_of(self.model, (k, i, j), box)))
         found.sort(key=lambda pair: -pair[0])
         return [(pose, p) for p, pose in found[:count]]
 
     def belief_map(self) -> np.ndarray:
-        windows = [(box, window.window_of(self.belief, box)) for box in self._boxes]
+        windows = list(self._windows.windows())
         peak = max(float(part.max()) for _, part in windows)
         picture = np.zeros(self.model.free.shape, dtype=np.int8)
         for (r0, r1, c0, c1), part in windows:
@@ -570,8 +589,7 @@ class GridLocalization:
         return picture
 
     def entropy_bits(self) -> float:
-        return float(sum(_entropy_bits(window.window_of(self.belief, box))
-                         for box in self._boxes)) + 0.0
+        return float(sum(_entropy_bits(part) for _, part in self._windows.windows())) + 0.0
 
 
 def _stamp(stamp_ns: int | None) -> int | None:

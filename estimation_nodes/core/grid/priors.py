@@ -41,34 +41,15 @@ def _belief_array(model: GridModel, out: FloatArray | None) -> FloatArray:
     return out
 
 
-def resident_where_written(shape: tuple[int, ...]) -> FloatArray:
-    """A zero array whose memory pages become resident only where they are written: numpy
-    asks the kernel for huge pages (2 MB) for a large array, and then a window written in
-    every heading layer makes each layer's huge page resident, the whole building's
-    belief in effect. (numpy's switch is private: where it is missing, a plain array.)"""
-    multiarray: Any = getattr(getattr(np, "_core", None), "multiarray", None)
-    if not hasattr(multiarray, "_set_madvise_hugepage"):
-        return np.zeros(shape)
-    asked = multiarray._get_madvise_hugepage()
-    multiarray._set_madvise_hugepage(False)
-    try:
-        return np.zeros(shape)
-    finally:
-        multiarray._set_madvise_hugepage(asked)
-
-
-def gaussian_prior_in_place(model: GridModel, x: float, y: float, yaw: float,
-                            covariance: FloatArray, out: FloatArray,
-                            held: list[tuple[int, int, int, int]], cut: float
-                            ) -> tuple[FloatArray, float]:
-    """``gaussian_prior`` written into ``out`` only within the box of the states whose
-    unnormalized value (1 at the most likely state) is at least ``cut``, after zeroing
-    ``held`` (the boxes holding ``out``'s nonzero states): the rest of ``out``, zero
-    already, is not written, so its memory need not become resident
-    (``resident_where_written``). Normalized over every state, as ``gaussian_prior``;
-    returned with the probability of the states left out, each of which is below ``cut``
-    (a floor of that size would drop them). Refused as ``gaussian_prior`` is, ``out`` then
-    untouched."""
+def gaussian_prior_window(model: GridModel, x: float, y: float, yaw: float,
+                          covariance: FloatArray, cut: float
+                          ) -> tuple[tuple[int, int, int, int], FloatArray, float]:
+    """``gaussian_prior`` within the box of the states whose unnormalized value (1 at the
+    most likely state) is at least ``cut``: that box (first row, row past the last, first
+    column, column past the last), the prior within it, and the probability of the states
+    left out, each of which is below ``cut`` (a floor of that size would drop them).
+    Normalized over every state, as ``gaussian_prior``, which refuses what this refuses;
+    nothing the building's size is made."""
     _check_model(model)
     x, y, yaw = check_pose("pose", (x, y, yaw))
     information = _information(model, covariance)
@@ -80,14 +61,12 @@ def gaussian_prior_in_place(model: GridModel, x: float, y: float, yaw: float,
         near |= values >= cut
     rows, cols = np.flatnonzero(near.any(axis=1)), np.flatnonzero(near.any(axis=0))
     r0, r1, c0, c1 = int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1
-    for b0, b1, d0, d1 in held:
-        out[:, b0:b1, d0:d1] = 0.0
-    part = out[:, r0:r1, c0:c1]
+    part = np.empty((model.heading_bins, r1 - r0, c1 - c0))
     for k, values in enumerate(_prior_values(model, (x, y, yaw), information, lowest)):
         part[k] = values[r0:r1, c0:c1]
     written = float(part.sum())
     part /= total
-    return out, max(0.0, (total - written) / total)
+    return (r0, r1, c0, c1), part, max(0.0, (total - written) / total)
 
 
 def _information(model: GridModel, covariance: FloatArray) -> FloatArray:
