@@ -8,9 +8,10 @@ map made, the grid model, the localizer made and its compiled kernels loaded, th
 initial pose, and some updates. Beside it: what a dense belief would take (heading bins
 x rows x columns doubles) against the most the localizer's windows held
 (core/grid/held.py), the share of the grid's cells that are free (the states a belief
-could hold), and the share of a dense belief's memory pages that hold a free state. The baseline: a process that imports numpy alone, and one that
-imports numba and compiles one function (what the compiled kernels cost before any of
-ours). Issue 36 asks the node for ACES <= 400 MB and Intel <= 300 MB.
+could hold), and the share of a dense belief's memory pages that hold a free state.
+The baseline: a process that imports numpy alone, and one that imports numba and
+compiles one function (what the compiled kernels cost before any of ours). Issue 36
+asks the node for ACES <= 400 MB and Intel <= 300 MB.
 """
 
 from __future__ import annotations
