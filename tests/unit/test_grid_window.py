@@ -101,6 +101,11 @@ def test_a_floor_drops_at_most_floor_per_state_and_never_the_largest():
     assert dropped == 0.0
 
 
+def area(box):
+    r0, r1, c0, c1 = box
+    return (r1 - r0) * (c1 - c0)
+
+
 def test_the_grown_box_holds_everything_the_prediction_reaches():
     model = room(60, 70)
     noise = default_odometry_noise()
@@ -116,10 +121,16 @@ def test_the_grown_box_holds_everything_the_prediction_reaches():
             predicted = _predict(belief, model, delta, noise)
         except ZeroEvidenceError:
             continue
-        r0, r1, c0, c1 = window.grown_box(window.support_box(belief), model, delta, noise)
-        outside = predicted.copy()
-        outside[:, r0:r1, c0:c1] = 0.0
-        assert not outside.any()
+        box = window.support_box(belief)
+        held = np.flatnonzero(belief.any(axis=(1, 2)))
+        for headings in (None, held):
+            r0, r1, c0, c1 = grown = window.grown_box(box, model, delta, noise, headings)
+            outside = predicted.copy()
+            outside[:, r0:r1, c0:c1] = 0.0
+            assert not outside.any()
+            assert window.disjoint([grown, box]) == [grown]     # it holds the source too
+        # The layer's own direction: a box of a few cells, not the motion's length each way.
+        assert (r1 - r0) * (c1 - c0) <= area(window.grown_box(box, model, delta, noise))
 
 
 @pytest.mark.parametrize("phase", [0, 1])

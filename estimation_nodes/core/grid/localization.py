@@ -445,9 +445,11 @@ class GridLocalization:
         """The steps over the windows: each grown by what the motion reaches (those that
         then overlap joined), predicted on its own and normalized together, then
         corrected together (window.correct_boxes)."""
-        held = self._windows.boxes
-        boxes = held if delta is None else window.disjoint(
-            [window.grown_box(box, self.model, delta, self.noise) for box in held])
+        held = self._windows
+        boxes = held.boxes if delta is None else window.disjoint(
+            [window.grown_box(box, self.model, delta, self.noise,
+                              np.flatnonzero(part.any(axis=(1, 2))))
+             for box, part in held.windows()])
         if delta is None:
             priors = [self._window(box)[1] for box in boxes]
         else:

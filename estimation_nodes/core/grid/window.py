@@ -48,7 +48,12 @@ from estimation_nodes.core.grid.laser import (
     _scan_reads,
 )
 from estimation_nodes.core.grid.model import GridModel
-from estimation_nodes.core.grid.motion import OdometryNoise, _motion_noise, _reaching_taps
+from estimation_nodes.core.grid.motion import (
+    OdometryNoise,
+    _bounded_shifts,
+    _motion_noise,
+    _reaching_taps,
+)
 from estimation_nodes.core.validation import FloatArray
 
 #: (first row, row past the last, first column, column past the last).
@@ -146,20 +151,41 @@ def _union(a: Box, b: Box) -> Box:
 
 
 def grown_box(box: Box, model: GridModel, delta: tuple[float, float, float],
-              noise: OdometryNoise) -> Box:
-    """Where a prediction with ``delta`` can put the probability now within ``box``."""
+              noise: OdometryNoise, headings: np.ndarray | None = None) -> Box:
+    """Where a prediction with ``delta`` can put the probability now within ``box``; with
+    ``headings`` (the heading layers holding it), where those layers' own shifts put it.
+
+    A layer moves by its own heading's shift before the headings are turned and blurred
+    (motion.py), so a window holding a few headings (a tracked robot's, a single state
+    the kidnap lattice kept) grows in their directions only, not by the motion's length
+    every way: a metre's motion grows such a window about 4 times less."""
     rows, cols = model.free.shape
-    trans = delta[1]
-    # Every layer's shift is at most trans cells long in rows and in columns; the
-    # bilinear split reaches one cell beyond its floor.
-    reach = trans / model.resolution
-    shift = math.ceil(reach) + 1 if reach < rows + cols else rows + cols
     sigma_cells, _ = _motion_noise(delta, noise, model)
     spread_rows = _reaching_taps(sigma_cells, rows).size // 2
     spread_cols = _reaching_taps(sigma_cells, cols).size // 2
+    low_r, high_r, low_c, high_c = _shift_range(model, delta, headings)
     r0, r1, c0, c1 = box
-    return (max(0, r0 - shift - spread_rows), min(rows, r1 + shift + spread_rows),
-            max(0, c0 - shift - spread_cols), min(cols, c1 + shift + spread_cols))
+    return (max(0, r0 + low_r - spread_rows), min(rows, r1 + high_r + spread_rows),
+            max(0, c0 + low_c - spread_cols), min(cols, c1 + high_c + spread_cols))
+
+
+def _shift_range(model: GridModel, delta: tuple[float, float, float],
+                 headings: np.ndarray | None) -> tuple[int, int, int, int]:
+    """The fewest and most rows and columns the layers ``headings`` (all: None) move by
+    (0 included), the bilinear split's cell beyond the floor of the longest included."""
+    rows, cols = model.free.shape
+    if headings is None or headings.size == 0:
+        # Every layer's shift is at most trans cells long in rows and in columns.
+        reach = delta[1] / model.resolution
+        shift = math.ceil(reach) + 1 if reach < rows + cols else rows + cols
+        return -shift, shift, -shift, shift
+    # The kernels' own shifts (motion._bounded_shifts), floored as they floor them.
+    shift_rows, shift_cols = _bounded_shifts(model, delta[0], delta[1])
+    floor_rows = np.floor(shift_rows[headings])
+    floor_cols = np.floor(shift_cols[headings])
+    # The box holds where the probability is too: the prediction runs on the grown box.
+    return (min(0, int(floor_rows.min())), max(0, int(floor_rows.max()) + 1),
+            min(0, int(floor_cols.min())), max(0, int(floor_cols.max()) + 1))
 
 
 def crop(model: GridModel, box: Box) -> GridModel:
