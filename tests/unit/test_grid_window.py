@@ -350,3 +350,24 @@ def test_the_prior_in_its_box_is_the_whole_one_above_the_cut():
     assert np.all(whole[~inside] < cut * whole.max())
     assert left_out == pytest.approx(float(whole[~inside].sum()), rel=1e-9)
     assert 0.0 < left_out < cut * whole.size
+
+
+def test_a_window_scored_on_its_free_cells_alone_has_their_very_sums():
+    """laser._scan_log_likelihood's free_only: the free cells' sums bit for bit, -inf on
+    the others, on both paths, for a box of mostly walls and for a whole row of runs."""
+    import dataclasses
+
+    base = room(260, 250)
+    rng = np.random.default_rng(12)
+    model = dataclasses.replace(base, free=base.free & (rng.random(base.free.shape) < 0.3))
+    ranges, angles = scan(20, np.random.default_rng(13))
+    for box in [(30, 200, 20, 240), window.full_box(model), (100, 101, 0, 250)]:
+        r0, r1, c0, c1 = box
+        free = model.free[r0:r1, c0:c1]
+        whole = _scan_log_likelihood(model, ranges, angles, True, box)
+        for compiled in (True, False):
+            runs = _scan_log_likelihood(model, ranges, angles, compiled, box, free_only=True)
+            np.testing.assert_array_equal(runs[:, free], whole[:, free])
+            assert np.all(runs[:, ~free] == -np.inf)
+    assert window._mostly_not_free(model, window.full_box(model))
+    assert not window._mostly_not_free(base, window.full_box(base))

@@ -178,6 +178,31 @@ def scan_log_likelihood(padded: FloatArray, pad_rows: int, pad_cols: int, offset
                     target[j] += segment[j]
 
 
+@_jit
+def scan_log_likelihood_runs(padded: FloatArray, pad_rows: int, pad_cols: int,
+                             offsets: np.ndarray, bins: int, rows: int, row_runs: np.ndarray,
+                             run_starts: np.ndarray, run_stops: np.ndarray,
+                             out: FloatArray) -> None:
+    """``scan_log_likelihood`` over the runs of cells listed (row i's: columns
+    run_starts[n]:run_stops[n] for n in row_runs[i]:row_runs[i + 1]; the free cells),
+    the same sums in the same order (the same bits); -inf at every other cell, which a
+    belief never holds. Unchecked, as ``scan_log_likelihood``."""
+    beams = offsets.shape[1]
+    for k in range(bins):
+        for i in range(rows):
+            target = out[k, i]
+            target[:] = -np.inf
+            for n in range(row_runs[i], row_runs[i + 1]):
+                first, stop = run_starts[n], run_stops[n]
+                run = target[first:stop]
+                run[:] = 0.0
+                for b in range(beams):
+                    start = pad_cols + offsets[k, b, 1] + first
+                    segment = padded[pad_rows + i + offsets[k, b, 0], start:start + stop - first]
+                    for j in range(stop - first):
+                        run[j] += segment[j]
+
+
 #: How many beams a lattice state's sum takes between two looks at its bound.
 CHECK_EVERY = 2
 
@@ -232,6 +257,10 @@ def warm_up() -> None:
     blur_cols_masked(belief, taps, np.ones((3, 3), dtype=np.bool_), held, out)
     offsets = np.zeros((2, 1, 2), dtype=np.int64)
     scan_log_likelihood(np.zeros((5, 5)), 1, 1, offsets, 2, 3, 3, out)
+    runs = np.array([0, 1, 1, 2], dtype=np.int64)
+    scan_log_likelihood_runs(np.zeros((5, 5)), 1, 1, offsets, 2, 3, runs,
+                             np.array([0, 1], dtype=np.int64), np.array([2, 3], dtype=np.int64),
+                             out)
     scan_log_likelihood_cells(np.zeros(25), np.array([6, 8]), np.zeros((2, 1), dtype=np.int64),
                               np.zeros(2), 0.0, np.zeros(1, dtype=np.int64), np.empty((2, 2)),
                               np.empty((2, 2), dtype=np.bool_))

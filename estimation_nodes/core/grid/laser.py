@@ -134,13 +134,16 @@ def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArra
                          compiled: bool = True,
                          box: tuple[int, int, int, int] | None = None,
                          headings: np.ndarray | None = None,
-                         reads: ScanReads | None = None) -> FloatArray:
+                         reads: ScanReads | None = None,
+                         free_only: bool = False) -> FloatArray:
     """The scan's log likelihood over every state, or over the states of the window
     ``box`` (first row, row past the last, first column, column past the last; see
     grid/window.py): (K, rows, columns) of the box; with ``headings`` (bin indices) at
     those heading layers only, in that order. The compiled kernels or numpy's are
     chosen by the grid's states, not the box's: numpy's cost a pass per heading and
-    beam, whatever the box's size. ``reads``: the scan's, when already made."""
+    beam, whatever the box's size. ``reads``: the scan's, when already made.
+    ``free_only``: scored on the free cells alone (the same bits), -inf elsewhere: a
+    belief is zero there, and a building's box is mostly walls and unknown space."""
     reads = reads if reads is not None else _scan_reads(model, ranges, angles)
     offsets = reads.offsets if headings is None else \
         np.ascontiguousarray(reads.offsets[headings])
@@ -154,15 +157,32 @@ def _scan_log_likelihood(model: GridModel, ranges: FloatArray, angles: FloatArra
     kernels = compiled_kernels(_states(model), compiled)
     if kernels is not None:
         out = np.empty(shape)      # the kernel writes every element
-        kernels.scan_log_likelihood(padded, pad_rows, pad_cols, offsets, shape[0],
-                                    rows, cols, out)
+        if free_only:
+            kernels.scan_log_likelihood_runs(padded, pad_rows, pad_cols, offsets, shape[0],
+                                             rows, *_free_runs(model.free[r0:r1, c0:c1]), out)
+        else:
+            kernels.scan_log_likelihood(padded, pad_rows, pad_cols, offsets, shape[0],
+                                        rows, cols, out)
         return out
     total = np.zeros(shape)
     for k in range(shape[0]):
         layer = total[k]
         for dr, dc in offsets[k]:
             layer += padded[pad_rows + dr:pad_rows + dr + rows, pad_cols + dc:pad_cols + dc + cols]
+    if free_only:
+        total[:, ~model.free[r0:r1, c0:c1]] = -np.inf
     return total
+
+
+def _free_runs(free: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The runs of True along each row of ``free``: row i's are columns starts[n]:stops[n]
+    for n in row_runs[i]:row_runs[i + 1]."""
+    edges = np.diff(free.astype(np.int8), axis=1, prepend=0, append=0)
+    run_rows, starts = np.nonzero(edges == 1)
+    _, stops = np.nonzero(edges == -1)
+    row_runs = np.zeros(free.shape[0] + 1, dtype=np.int64)
+    np.cumsum(np.bincount(run_rows, minlength=free.shape[0]), out=row_runs[1:])
+    return row_runs, starts.astype(np.int64), stops.astype(np.int64)
 
 
 #: How many beams a listed state's sum takes between two looks at its bound (compiled.py's

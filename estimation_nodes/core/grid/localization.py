@@ -451,7 +451,8 @@ class GridLocalization:
                               np.flatnonzero(part.any(axis=(1, 2))))
              for box, part in held.windows()])
         if delta is None:
-            priors = [self._window(box)[1] for box in boxes]
+            # The correction only reads its prior: a start's uniform one as it is held.
+            priors = list(held.parts)
         else:
             # Each window with the kernels of the whole grid's size: numpy's on a small
             # window cost more than the compiled ones (a pass per heading).

@@ -279,7 +279,8 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
     """
     reads = _scan_reads(model, ranges, angles)
     held = [_held_headings(prior) for prior in priors]
-    lls = [_scan_log_likelihood(model, ranges, angles, compiled, box, headings, reads)
+    lls = [_scan_log_likelihood(model, ranges, angles, compiled, box, headings, reads,
+                                free_only=_mostly_not_free(model, box))
            for box, headings in zip(boxes, held)]
     held_priors = [prior if headings is None else prior[headings]
                    for prior, headings in zip(priors, held)]
@@ -338,13 +339,13 @@ def _weighted_parts(lls: list[FloatArray], held_priors: list[FloatArray],
     parts = []
     for ll, prior, whole, headings in zip(lls, held_priors, priors, held):
         if not math.isfinite(peak):
-            parts.append(np.zeros_like(whole))
+            parts.append(np.zeros(whole.shape))
             continue
         weighted, _ = _weighted(ll, peak, prior)
         if scale != 1.0:
             weighted *= scale
         if headings is not None:
-            part = np.zeros_like(whole)
+            part = np.zeros(whole.shape)
             part[headings] = weighted
             weighted = part
         parts.append(weighted)
@@ -474,6 +475,18 @@ def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase
     lattice_peak = float(np.max(ll, where=scored, initial=-math.inf))
     return LatticeWeights(rows, cols, ll, scored, unscored_count, unscored_peak, per_state,
                           lattice_peak, reach)
+
+
+#: A window with a smaller share of free cells is scored on its free cells alone
+#: (``laser._scan_log_likelihood``'s ``free_only``, the same bits): a global start's
+#: building-wide window is mostly walls and unknown space (ACES: 80 %), while a tracked
+#: robot's, mostly floor, costs less scored whole, in rows the kernel runs straight along.
+FREE_ONLY_BELOW = 0.5
+
+
+def _mostly_not_free(model: GridModel, box: Box) -> bool:
+    r0, r1, c0, c1 = box
+    return bool(model.free[r0:r1, c0:c1].mean() < FREE_ONLY_BELOW)
 
 
 def _held_headings(prior: FloatArray) -> np.ndarray | None:
