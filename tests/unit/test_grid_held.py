@@ -4,6 +4,7 @@ building, and the same filter as the dense one."""
 import numpy as np
 import pytest
 
+from estimation_nodes.core.errors import InvalidInputError
 from estimation_nodes.core.grid.held import HeldBelief
 from estimation_nodes.core.grid.localization import GridLocalization
 from estimation_nodes.params.grid import default_odometry_noise
@@ -78,3 +79,23 @@ def test_gather_and_regroup_keep_every_state_where_it_is():
     expected = dense.copy()
     expected[2, 15, 15] = 0.5
     np.testing.assert_array_equal(regrouped.dense(), expected)
+
+
+def test_a_windowed_localizer_s_belief_is_the_caller_s_own_array():
+    """With belief_floor, ``belief`` is a new array every time, even where one window
+    covers the whole grid (a map free to its edges, a uniform start): writing it changes
+    nothing in the filter."""
+    import dataclasses
+
+    base = room(30, 40)
+    model = dataclasses.replace(base, free=np.ones_like(base.free))
+    windowed = localizer(model, 1e-9)
+    assert windowed._windows.boxes == [(0, 30, 0, 40)]
+    entropy = windowed.entropy_bits()
+    belief = windowed.belief
+    belief[:] = 0.0
+    belief[0, 0, 0] = 1.0
+    assert windowed.entropy_bits() == entropy
+    assert windowed.most_likely_states(0) == []
+    with pytest.raises(InvalidInputError, match="count"):
+        windowed.most_likely_states(-1)

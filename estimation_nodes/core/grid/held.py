@@ -89,10 +89,12 @@ class HeldBelief:
         return HeldBelief(self.shape, list(boxes), parts)
 
     def dense(self) -> FloatArray:
-        """The belief over the whole grid: the held array for the dense filter's one
-        window, else a new array (the building's size: for tests and tools)."""
-        if len(self.parts) == 1 and self.parts[0].shape == self.shape:
-            return self.parts[0]
+        """The belief over the whole grid: the held array where it is one window of the
+        whole grid that may be written (the dense filter's), else a new array (the
+        building's size: for tests and tools)."""
+        whole = self.parts[0] if len(self.parts) == 1 else None
+        if whole is not None and whole.shape == self.shape and whole.flags.writeable:
+            return whole
         return self.gather((0, self.shape[1], 0, self.shape[2]))
 
     @property

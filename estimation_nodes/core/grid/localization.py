@@ -203,6 +203,8 @@ class GridLocalization:
         """The belief over the grid's states (heading, row, column). With belief_floor a
         new array the building's size, made from the windows held (for tests and tools:
         the localizer itself reads its windows)."""
+        if self._floor > 0.0:
+            return self._windows.gather(window.full_box(self.model))
         return self._windows.dense()
 
     @property
@@ -567,6 +569,8 @@ class GridLocalization:
         (the poses of their cells and headings): what RViz's particle cloud shows of a
         particle filter."""
         count = check_integer("count", count)
+        if count < 0:
+            raise InvalidInputError(f"count: expected an integer >= 0, got {count}")
         found: list[tuple[float, Pose]] = []
         for box, part in self._windows.windows():
             # A heading layer at a time: a start's uniform belief repeats one layer
@@ -574,6 +578,8 @@ class GridLocalization:
             for k, layer in enumerate(part):
                 flat = layer.reshape(-1)
                 n = min(count, flat.size)
+                if n == 0:
+                    continue
                 for index in np.argpartition(flat, flat.size - n)[flat.size - n:]:
                     if flat[index] > 0.0:
                         i, j = (int(v) for v in np.unravel_index(index, layer.shape))
