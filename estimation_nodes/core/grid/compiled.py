@@ -222,27 +222,36 @@ def scan_log_likelihood_cells(field: FloatArray, starts: np.ndarray, offsets: np
     stops is summed again in the beams' order. Unchecked, as ``scan_log_likelihood``."""
     bins, beams = offsets.shape
     count = starts.size
+    # Each heading's offsets in the bound's order, and the bound's allowance for the
+    # beams left after the m-th (its value, as (beams - 1 - m) * most, to the bit).
+    ordered = np.empty(beams, dtype=np.int64)
+    allowance = np.empty(beams)
+    for m in range(beams):
+        allowance[m] = (beams - 1 - m) * most
     for k in range(bins):
         offset = offsets[k]
+        for m in range(beams):
+            ordered[m] = offset[order[m]]
         for n in range(count):
             start = starts[n]
             floor = below[n]
-            scored[k, n] = True
             if floor > -np.inf:
                 total = 0.0
+                stopped = False
                 for m in range(beams):
-                    total += field[start + offset[order[m]]]
-                    left = beams - 1 - m
-                    if m % CHECK_EVERY == CHECK_EVERY - 1 and total + left * most < floor:
-                        out[k, n] = total + left * most
-                        scored[k, n] = False
+                    total += field[start + ordered[m]]
+                    if m % CHECK_EVERY == CHECK_EVERY - 1 and total + allowance[m] < floor:
+                        out[k, n] = total + allowance[m]
+                        stopped = True
                         break
-                if not scored[k, n]:
+                if stopped:
+                    scored[k, n] = False
                     continue
             total = 0.0
             for b in range(beams):
                 total += field[start + offset[b]]
             out[k, n] = total
+            scored[k, n] = True
 
 
 def warm_up() -> None:
