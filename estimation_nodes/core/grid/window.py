@@ -315,9 +315,8 @@ def correct_boxes(priors: list[FloatArray], boxes: list[Box], model: GridModel,
         part /= total
     if lattice is None:
         return Correction(parts, boxes, _no_states(), log_evidence, 0.0)
-    weights = lattice.weights / total
-    kept, left_out, kidnapped = _lattice_into(parts, boxes, weights, lattice.rows,
-                                              lattice.cols, floor)
+    kept, left_out, kidnapped = _lattice_into(parts, boxes, lattice, lattice.weights / total,
+                                              floor)
     # The states not scored to the end, at their bounds: neither probability is understated.
     unscored = lattice.unscored / total
     left_out += unscored
@@ -361,15 +360,18 @@ UNSCORED_SHARE = 1e-3
 @dataclass
 class LatticeWeights:
     """The kidnap lattice's part of a correction: its listed cells (rows, columns), the
-    weight share / states x exp(log likelihood) of each of its states scored to the end
-    (0 for the others; their weights' sum is at most ``unscored``), and the largest log
-    likelihood among the scored (the weights relative to ``peak`` once ``relative_to``
+    states scored to the end (``scored_states``: flat indices into (heading, cell), the
+    lattice's every KIDNAP_STEP-th heading by its cells) with their weights share /
+    states x exp(log likelihood) (``weights``, one per scored state: a few in a thousand
+    of the lattice's, the rest 0 with their sum at most ``unscored``), and the largest
+    log likelihood among them (the weights relative to ``peak`` once ``relative_to``
     ran)."""
 
     rows: np.ndarray
     cols: np.ndarray
+    scored_states: np.ndarray
+    #: The scored states' log likelihoods, weights once ``relative_to`` ran.
     weights: FloatArray
-    scored: np.ndarray
     #: How many states were not scored to the end, and the largest of their bounds.
     unscored_count: int
     unscored_peak: float
@@ -378,30 +380,28 @@ class LatticeWeights:
     #: The cells within the odometry-failure component's reach, where it is asked for.
     reach: failure.Reach | None = None
     unscored: float = 0.0
-    #: The flat indices of the states scored to the end (``relative_to`` lists them).
-    scored_states: np.ndarray | None = None
+
+    def states(self) -> tuple[np.ndarray, np.ndarray]:
+        """The scored states' lattice heading indices and cell indices."""
+        return np.divmod(self.scored_states, self.rows.size)
 
     def astray(self, model: GridModel, tracked: float) -> failure.Astray:
         """The odometry-failure component, once ``relative_to`` ran (``tracked``: the rest
         of the mixture's evidence): from the states scored to the end, the only ones
         with a weight."""
-        assert self.reach is not None and self.scored_states is not None
-        k, n = np.divmod(self.scored_states, self.rows.size)
+        assert self.reach is not None
+        k, n = self.states()
         headings = model.headings()[::KIDNAP_STEP]
-        return failure.astray_in(headings, k, n, self.weights.reshape(-1)[self.scored_states],
-                                 tracked, self.reach, 1.0 / self.per_state)
+        return failure.astray_in(headings, k, n, self.weights, tracked, self.reach,
+                                 1.0 / self.per_state)
 
     def relative_to(self, peak: float) -> None:
         """Weights relative to ``peak``: the scored states' from their log likelihoods, the
-        others' 0 and their sum bounded by their count x their largest bound."""
-        scored = self.scored_states = np.flatnonzero(self.scored)
-        flat = self.weights.reshape(-1)
-        values = flat[scored]
+        others' sum bounded by their count x their largest bound."""
+        values = self.weights
         np.subtract(values, peak, out=values)
         np.exp(values, out=values)
         values *= self.per_state
-        flat[:] = 0.0
-        flat[scored] = values
         if self.unscored_count:
             self.unscored = self.per_state * self.unscored_count * math.exp(
                 self.unscored_peak - peak)
@@ -470,11 +470,13 @@ def _lattice_weights(model: GridModel, reads: ScanReads, boxes: list[Box], phase
                                             compiled)
     if weight != 1.0:
         np.multiply(ll, weight, out=ll)
-    unscored_count = scored.size - int(np.count_nonzero(scored))
-    unscored_peak = float(np.max(ll, where=~scored, initial=-math.inf))
-    lattice_peak = float(np.max(ll, where=scored, initial=-math.inf))
-    return LatticeWeights(rows, cols, ll, scored, unscored_count, unscored_peak, per_state,
-                          lattice_peak, reach)
+    scored_states = np.flatnonzero(scored)
+    values = ll.reshape(-1)[scored_states]
+    unscored_count = scored.size - scored_states.size
+    unscored_peak = float(np.max(ll, where=~scored, initial=-math.inf)) if unscored_count \
+        else -math.inf
+    return LatticeWeights(rows, cols, scored_states, values, unscored_count, unscored_peak,
+                          per_state, float(values.max(initial=-math.inf)), reach)
 
 
 #: A window with a smaller share of free cells is scored on its free cells alone
@@ -518,29 +520,28 @@ def _no_states() -> States:
     return empty, empty, empty, np.zeros(0)
 
 
-def _lattice_into(parts: list[FloatArray], boxes: list[Box], lattice: FloatArray,
-                  rows: np.ndarray, cols: np.ndarray,
-                  floor: float) -> tuple[States, float, float]:
-    """Add the lattice's posterior (every KIDNAP_STEP-th heading at the cells (rows[n],
-    cols[n])) within each box to that box's part; of the rest, the states of ``floor``
-    or more (headings, rows, columns, probabilities) and the probability of those left
-    out; and the lattice's whole posterior probability."""
+def _lattice_into(parts: list[FloatArray], boxes: list[Box], lattice: LatticeWeights,
+                  weights: FloatArray, floor: float) -> tuple[States, float, float]:
+    """Add the lattice's posterior (``weights``: of its scored states, the others' 0)
+    within each box to that box's part; of the rest, the states of ``floor`` or more
+    (headings, rows, columns, probabilities) and the probability of those left out; and
+    the lattice's whole posterior probability."""
     step = KIDNAP_STEP
-    covered = np.zeros(rows.size, dtype=bool)
+    k, n = lattice.states()
+    rows, cols = lattice.rows[n], lattice.cols[n]
+    covered = np.zeros(weights.size, dtype=bool)
     inside = 0.0
     for part, (r0, r1, c0, c1) in zip(parts, boxes):
-        within = np.flatnonzero((rows >= r0) & (rows < r1) & (cols >= c0) & (cols < c1))
-        if within.size == 0:
+        within = (rows >= r0) & (rows < r1) & (cols >= c0) & (cols < c1)
+        if not within.any():
             continue
-        # The cells are distinct, so the fancy-indexed += adds each once.
-        values = lattice[:, within]
-        part[::step, rows[within] - r0, cols[within] - c0] += values
+        # The states are distinct, so the fancy-indexed += adds each once.
+        values = weights[within]
+        part[step * k[within], rows[within] - r0, cols[within] - c0] += values
         inside += float(values.sum())
-        covered[within] = True
-    chosen = lattice >= floor if floor > 0 else lattice > 0
-    chosen[:, covered] = False
-    k, n = np.nonzero(chosen)
-    values = lattice[k, n]
-    everything = float(lattice.sum())
+        covered |= within
+    chosen = (weights >= floor if floor > 0 else weights > 0) & ~covered
+    values = weights[chosen]
+    everything = float(weights.sum())
     left_out = max(everything - inside - float(values.sum()), 0.0)
-    return (step * k, rows[n], cols[n], values), left_out, everything
+    return (step * k[chosen], rows[chosen], cols[chosen], values), left_out, everything
