@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from estimation_nodes.core.grid.window import Box, States, support_boxes
+from estimation_nodes.core.grid.window import Box, States, support_boxes, window_of
 from estimation_nodes.core.validation import FloatArray
 
 
@@ -34,20 +34,18 @@ class HeldBelief:
 
     @classmethod
     def windowed(cls, belief: FloatArray) -> HeldBelief:
-        """A belief over the whole grid, held as copies of the windows of its support
-        (``window.support_boxes``)."""
-        boxes = support_boxes(np.any(belief, axis=0))
-        return cls(belief.shape, boxes, [_copy_of(belief, box) for box in boxes])
+        """A belief over the whole grid, held as copies of the windows of its support."""
+        _, rows, cols = belief.shape
+        return cls.within(belief.shape, (0, rows, 0, cols), belief)
 
     @classmethod
     def within(cls, shape: tuple[int, int, int], box: Box, part: FloatArray) -> HeldBelief:
-        """``part`` (the belief within ``box``, zero outside it), held as the windows of
-        its support."""
+        """``part`` (the belief within ``box``, zero outside it), held as copies of the
+        windows of its support (``window.support_boxes``)."""
+        local = support_boxes(np.any(part, axis=0))
         r0, _, c0, _ = box
-        boxes = [(r0 + a, r0 + b, c0 + c, c0 + d)
-                 for a, b, c, d in support_boxes(np.any(part, axis=0))]
-        return cls(shape, boxes, [_copy_of(part, (a - r0, b - r0, c - c0, d - c0))
-                                  for a, b, c, d in boxes])
+        return cls(shape, [(r0 + a, r0 + b, c0 + c, c0 + d) for a, b, c, d in local],
+                   [window_of(part, within) for within in local])
 
     def windows(self) -> Iterator[tuple[Box, FloatArray]]:
         return zip(self.boxes, self.parts)
@@ -108,7 +106,3 @@ class HeldBelief:
         """The states the windows hold, all headings."""
         return sum((r1 - r0) * (c1 - c0) for r0, r1, c0, c1 in self.boxes) * self.shape[0]
 
-
-def _copy_of(belief: FloatArray, box: Box) -> FloatArray:
-    r0, r1, c0, c1 = box
-    return np.ascontiguousarray(belief[:, r0:r1, c0:c1])

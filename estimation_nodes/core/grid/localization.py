@@ -230,9 +230,7 @@ class GridLocalization:
 
     def global_localization(self) -> None:
         """Not knowing where the robot is: uniform over the free cells."""
-        self._held = self._uniform()
-        self.last_dropped = 0.0
-        self._last_scan = None
+        self._take(self._uniform(), 0.0)
         self.log_evidence = float("nan")
         self._forget_doubt()
         self._started = UNIFORM
@@ -240,18 +238,15 @@ class GridLocalization:
     def set_prior(self, pose: Pose, covariance: FloatArray) -> None:
         """A Gaussian prior (RViz's "2D Pose Estimate")."""
         x, y, yaw = check_pose("pose", pose)
-        # Written over the belief (a building's is hundreds of MB): the prior refused, the
-        # belief is as it was. With a floor, only within the prior's box and the old
-        # belief's windows (the rest is zero and stays unwritten).
+        # Made in full before it is taken: the prior refused, the belief is as it was.
         if self._floor > 0.0:
+            # Within the prior's box only: nothing the building's size.
             box, part, left_out = gaussian_prior_window(self.model, x, y, yaw, covariance,
                                                         self._floor)
             part, dropped = window.drop_below(part, self._floor)
-            self._held = HeldBelief.within(self.model.shape, box, part)
-            self.last_dropped = dropped + left_out
-            self._last_scan = None
+            self._take(HeldBelief.within(self.model.shape, box, part), dropped + left_out)
         else:
-            # Written over the belief held (a building's is hundreds of MB), if any.
+            # Written over the dense belief held (a building's is hundreds of MB), if any.
             held = None if self._held is None else self._held.dense()
             self._hold(gaussian_prior(self.model, x, y, yaw, covariance, out=held))
         self._forget_doubt()
@@ -267,9 +262,14 @@ class GridLocalization:
     def _hold(self, belief: FloatArray) -> None:
         """Take ``belief`` over the whole grid as the belief: with belief_floor > 0 without
         its states below the floor, held in the windows of the rest."""
-        belief, self.last_dropped = window.drop_below(belief, self._floor)
-        self._held = HeldBelief.windowed(belief) if self._floor > 0 \
-            else HeldBelief.whole(belief)
+        belief, dropped = window.drop_below(belief, self._floor)
+        self._take(HeldBelief.windowed(belief) if self._floor > 0 else HeldBelief.whole(belief),
+                   dropped)
+
+    def _take(self, held: HeldBelief, dropped: float) -> None:
+        """Take ``held`` as the belief (``dropped``: the probability its making left out),
+        the last scan forgotten (an update notes its own after)."""
+        self._held, self.last_dropped = held, dropped
         self._last_scan = None
 
     def _hold_windows(self, correction: window.Correction) -> None:
